@@ -1,0 +1,54 @@
+"""jaxunilat: differentiable JAX simulation of mechanical systems with unilateral constraints.
+
+Implements Kukla, Posiadała, Skalmierski & Tylikowski (1990), "Dynamics problem of
+mechanical systems with unilateral constraints" [K90]: a table-tennis ball between two
+rackets with air drag, with penalty contact written with Heaviside functions.
+
+Importing the package enables float64 in JAX.
+"""
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+from ._ball import (  # noqa: E402
+    PAPER_DRAG as PAPER_DRAG,
+    PAPER_GAP as PAPER_GAP,
+    PAPER_GRAVITY as PAPER_GRAVITY,
+    PAPER_MASS as PAPER_MASS,
+    TABLE1 as TABLE1,
+    Ball as Ball,
+    ball_state as ball_state,
+)
+from ._contact import (  # noqa: E402
+    AbstractContactLaw as AbstractContactLaw,
+    ClampedKelvinVoigt as ClampedKelvinVoigt,
+    HuntCrossley as HuntCrossley,
+    KelvinVoigt as KelvinVoigt,
+    clearance_force as clearance_force,
+    contact_time as contact_time,
+    damping_ratio as damping_ratio,
+    hunt_crossley_contact_time as hunt_crossley_contact_time,
+    parameters_from_restitution as parameters_from_restitution,
+    restitution as restitution,
+    symmetric_clearance_force as symmetric_clearance_force,
+)
+from ._heaviside import (  # noqa: E402
+    AbstractHeaviside as AbstractHeaviside,
+    Exact as Exact,
+    Logistic as Logistic,
+    Softplus as Softplus,
+    heaviside as heaviside,
+)
+from ._io import read_csv as read_csv, write_csv as write_csv  # noqa: E402
+from ._model import AbstractModel as AbstractModel  # noqa: E402
+from ._plot import plot_ball as plot_ball, save_figure as save_figure  # noqa: E402
+from ._simulate import (  # noqa: E402
+    Solution as Solution,
+    Status as Status,
+    simulate as simulate,
+    trace_counts as trace_counts,
+)
+from ._solvers import RK4 as RK4  # noqa: E402
+
+__version__ = "0.1.0"

@@ -1,0 +1,239 @@
+"""The table-tennis ball between two rackets [K90 §3, Eq. 3.1–3.3, Table 1]."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike
+
+from ._contact import AbstractContactLaw, KelvinVoigt
+from ._heaviside import AbstractHeaviside, Exact
+from ._model import AbstractModel
+from ._validate import check_range
+
+#: The paper's constants [K90 §5.1]: gap 2a (m), mass (kg), gravity (m/s²), drag k (s/m).
+PAPER_GAP = 0.8
+PAPER_MASS = 2.37e-3
+PAPER_GRAVITY = 9.81
+PAPER_DRAG = 0.122
+
+#: Table 1 of [K90]: example → (κ [N/m], k_r [N·s/m]).
+TABLE1 = {
+    1: (1.0e4, 0.1),
+    2: (1.0e4, 0.2),
+    3: (1.0e4, 0.4),
+    4: (5.0e3, 0.2),
+    5: (2.0e4, 0.2),
+}
+
+
+def _optional_array(value):
+    return None if value is None else jnp.asarray(value, dtype=float)
+
+
+def _array(value):
+    return jnp.asarray(value, dtype=float)
+
+
+class Ball(AbstractModel):
+    """A ball moving vertically between two walls (rackets) with quadratic air drag.
+
+    State y = (x, v): position (m, upward positive, origin mid-way between the
+    rackets) and velocity (m/s). The equation of motion [K90 Eq. 3.1–3.2] is
+
+        m v' = F_lower − F_upper − k² m g |v| v − m g
+
+    where F_lower and F_upper are the contact law's repulsive forces. With the
+    default `KelvinVoigt` law and walls at ±a this is exactly the paper's
+    m ẍ = P(x) − k² m g |ẋ| ẋ − m g − k_r ẋ [H(x − a) + H(−x − a)].
+
+    **Arguments:**
+
+    - `kappa`: contact stiffness κ, N/m (> 0).
+    - `k_r`: contact damping, N·s/m (≥ 0); `None` removes the damping term.
+    - `mass`: m, kg (> 0). Default: the paper's 2.37e-3.
+    - `gravity`: g, m/s² (≥ 0). Default 9.81.
+    - `drag`: k = 1/v_max, s/m (≥ 0), v_max being the terminal speed; `None`
+      removes the drag term. Default: the paper's 0.122.
+    - `lower`: the lower wall's position, m, or `None` (absent). Default −0.4.
+    - `upper`: the upper wall's position, m, or `None` (absent). Default +0.4.
+    - `heaviside`: the Heaviside option (`Exact()`, `Logistic(eps)`, `Softplus(eps)`).
+    - `law`: the contact law (`KelvinVoigt()`, `HuntCrossley(n)`, `ClampedKelvinVoigt()`).
+
+    Whether `k_r`, `drag`, `lower` and `upper` are `None` is static structure;
+    their values are traced, so changing them does not recompile.
+    """
+
+    kappa: Array = eqx.field(converter=_array)
+    k_r: Array | None = eqx.field(converter=_optional_array, default=0.2)
+    mass: Array = eqx.field(converter=_array, default=PAPER_MASS)
+    gravity: Array = eqx.field(converter=_array, default=PAPER_GRAVITY)
+    drag: Array | None = eqx.field(converter=_optional_array, default=PAPER_DRAG)
+    lower: Array | None = eqx.field(converter=_optional_array, default=-PAPER_GAP / 2)
+    upper: Array | None = eqx.field(converter=_optional_array, default=PAPER_GAP / 2)
+    heaviside: AbstractHeaviside = Exact()
+    law: AbstractContactLaw = KelvinVoigt()
+
+    state_names: ClassVar[tuple[str, ...]] = ("x", "v")
+    output_names: ClassVar[tuple[str, ...]] = (
+        "x",
+        "v",
+        "force",
+        "penetration",
+        "energy",
+        "contact",
+    )
+
+    def __check_init__(self):
+        check_range("kappa", self.kappa, lo=0.0, lo_open=True, unit="N/m")
+        check_range("k_r", self.k_r, lo=0.0, unit="N*s/m", allow_none=True)
+        check_range("mass", self.mass, lo=0.0, lo_open=True, unit="kg")
+        check_range("gravity", self.gravity, lo=0.0, unit="m/s^2")
+        check_range("drag", self.drag, lo=0.0, unit="s/m", allow_none=True)
+        check_range("lower", self.lower, unit="m", allow_none=True)
+        check_range("upper", self.upper, unit="m", allow_none=True)
+        if self.lower is not None and self.upper is not None:
+            check_range("gap (upper - lower)", self.upper - self.lower, lo=0.0, lo_open=True, unit="m")
+
+    @classmethod
+    def table1(cls, example: int = 2, **overrides) -> Ball:
+        """The paper's ball for a Table 1 example (1–5) [K90 §5.1].
+
+        Walls at ±0.4 m, m = 2.37e-3 kg, g = 9.81 m/s², k = 0.122 s/m and the
+        example's κ and k_r. Keyword `overrides` replace any field.
+        """
+        if example not in TABLE1:
+            raise ValueError(f"example = {example!r} is out of range; valid Table 1 examples are 1-5")
+        kappa, k_r = TABLE1[example]
+        kwargs = dict(kappa=kappa, k_r=k_r)
+        kwargs.update(overrides)
+        return cls(**kwargs)
+
+    # -- physics ------------------------------------------------------------------
+
+    def _wall_terms(self, x, v, mask=None):
+        """Per wall: (penetration, switch, repulsive force along +x).
+
+        With `mask` (one bool per present wall, lower first) the exact model of that
+        region is used: H is the mask and δ = mask·(wall distance). This is the smooth
+        right-hand side the event mode integrates.
+        """
+        h = self.heaviside
+        terms = []
+        walls = []
+        if self.lower is not None:
+            walls.append((self.lower - x, -v, 1.0))
+        if self.upper is not None:
+            walls.append((x - self.upper, v, -1.0))
+        for i, (z, rate, sign) in enumerate(walls):
+            if mask is None:
+                pen, on = h.ramp(z), h.step(z)
+            else:
+                on = mask[i].astype(z.dtype)
+                pen = on * z
+            terms.append((pen, on, sign * self.law.force(pen, rate, on, self.kappa, self.k_r)))
+        return terms
+
+    def contact_force(self, x: Array, v: Array, mask: Array | None = None) -> Array:
+        """The total contact force on the ball, N (positive upward)."""
+        force = jnp.zeros_like(x)
+        for _, _, f in self._wall_terms(x, v, mask):
+            force = force + f
+        return force
+
+    def acceleration(self, x: Array, v: Array, mask: Array | None = None) -> Array:
+        """ẍ, m/s² [K90 Eq. 3.1]."""
+        a = self.contact_force(x, v, mask) / self.mass - self.gravity
+        if self.drag is not None:
+            a = a - self.drag**2 * self.gravity * jnp.abs(v) * v
+        return a
+
+    def vector_field(self, t, y, args=None):
+        x, v = y[0], y[1]
+        return jnp.stack([v, self.acceleration(x, v)])
+
+    # -- the event mode's view: switching functions and smooth regions ------------
+
+    @property
+    def num_switches(self) -> int:
+        """How many walls are present (static)."""
+        return int(self.lower is not None) + int(self.upper is not None)
+
+    @property
+    def contact_mass(self) -> Array:
+        """The mass that turns accelerations into contact forces, kg."""
+        return self.mass
+
+    def switches(self, y: Array) -> Array:
+        """Signed distances into the walls, m, lower first: g_i > 0 ⇔ wall i in contact."""
+        x = y[0]
+        g = []
+        if self.lower is not None:
+            g.append(self.lower - x)
+        if self.upper is not None:
+            g.append(x - self.upper)
+        return jnp.stack(g)
+
+    def region_vector_field(self, t, y, mask):
+        """dy/dt of the exact model with the contacts given by `mask` held fixed."""
+        x, v = y[0], y[1]
+        return jnp.stack([v, self.acceleration(x, v, mask)])
+
+    def observable(self, y: Array) -> Array:
+        """The quantity whose roots are apexes (in flight) and deepest points (in contact): v."""
+        return y[1]
+
+    def energy(self, x: Array, v: Array) -> Array:
+        """Kinetic + gravitational (zero at x = 0) + stored contact energy, J."""
+        e = 0.5 * self.mass * v**2 + self.mass * self.gravity * x
+        for pen, _, _ in self._wall_terms(x, v):
+            e = e + self.law.potential(pen, self.kappa)
+        return e
+
+    def penetration(self, x: Array) -> Array:
+        """Depth into the nearest wall, m (0 in free flight)."""
+        pen = jnp.zeros_like(x)
+        for p, _, _ in self._wall_terms(x, jnp.zeros_like(x)):
+            pen = jnp.maximum(pen, p)
+        return pen
+
+    def in_contact(self, x: Array) -> Array:
+        """1.0 while x is beyond a wall (exact test, whatever the Heaviside option)."""
+        on = jnp.zeros_like(x, dtype=bool)
+        if self.lower is not None:
+            on = on | (x < self.lower)
+        if self.upper is not None:
+            on = on | (x > self.upper)
+        return on.astype(x.dtype)
+
+    def output(self, name, t, y):
+        x, v = y[0], y[1]
+        if name == "x":
+            return x
+        if name == "v":
+            return v
+        if name == "force":
+            return self.contact_force(x, v)
+        if name == "penetration":
+            return self.penetration(x)
+        if name == "energy":
+            return self.energy(x, v)
+        if name == "contact":
+            return self.in_contact(x)
+        raise ValueError(f"output = {name!r} is not supported; choose from {self.output_names}")
+
+    def paper_initial_state(self) -> Array:
+        """The paper's initial state [K90 §5.1]: x(0) = lower wall (−a), v(0) = −1/k.
+
+        The ball touches the lower racket moving down at the terminal speed
+        1/k = 1/0.122 ≈ 8.197 m/s (the paper's k, whether or not drag is on).
+        """
+        x0 = self.lower if self.lower is not None else jnp.asarray(-PAPER_GAP / 2)
+        return jnp.stack([x0, jnp.asarray(-1.0 / PAPER_DRAG)])
+
+
+def ball_state(x0: ArrayLike, v0: ArrayLike) -> Array:
+    """Pack an initial state y0 = (x0 [m], v0 [m/s])."""
+    return jnp.stack([jnp.asarray(x0, dtype=float), jnp.asarray(v0, dtype=float)])

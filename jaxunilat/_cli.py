@@ -1,0 +1,350 @@
+"""The `jaxunilat` command line.
+
+    jaxunilat simulate ball [--example N] [--kappa K] ... [--out FILE.csv] [--plot FILE.png]
+
+Exit codes: 0 success, 1 a run-time failure (the solver diverged or ran out of steps,
+a file could not be written), 2 bad user input. Every error is one line on stderr,
+`jaxunilat: error: ...`, with no traceback and no usage dump.
+
+Adding a command: write `_add_<name>(subparsers)` that adds its parser and sets
+`func=<handler>` (a function `args -> int`), then list it in `_COMMANDS`. Models under
+`simulate` are listed in `_SIMULATE_MODELS` the same way.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import re
+import sys
+import time
+
+import numpy as np
+
+PROG = "jaxunilat"
+EXIT_OK, EXIT_RUNTIME, EXIT_USAGE = 0, 1, 2
+
+
+class UsageError(Exception):
+    """Bad user input: reported as one line, exit code 2."""
+
+
+class RunError(Exception):
+    """A run-time failure: reported as one line, exit code 1."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """An `ArgumentParser` that raises `UsageError` instead of printing usage and exiting.
+
+    It also reads `-1e-3`, `-inf` and `-.5` as negative numbers, not as options.
+    """
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(
+            r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.IGNORECASE
+        )
+
+    def error(self, message):
+        raise UsageError(message)
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+# -- simulate ball -------------------------------------------------------------------
+
+
+def _add_simulate_ball(models) -> None:
+    from ._ball import PAPER_DRAG, PAPER_GAP
+    from ._solvers import SOLVERS
+
+    p = models.add_parser(
+        "ball",
+        help="the table-tennis ball between two rackets [K90 §3, Table 1]",
+        description="Simulate the table-tennis ball between two rackets [K90 Eq. 3.1-3.3]. "
+        "Parameters default to Table 1's example; explicit flags override it.",
+    )
+    model = p.add_argument_group("model")
+    model.add_argument("--example", type=int, default=2, help="Table 1 example 1-5 (default 2)")
+    model.add_argument("--kappa", type=float, help="contact stiffness kappa, N/m (default: the example's)")
+    model.add_argument(
+        "--k-r", type=float, dest="k_r", help="contact damping k_r, N*s/m (default: the example's)"
+    )
+    model.add_argument(
+        "--drag", type=float, help=f"drag k = 1/v_max, s/m; 0 removes drag (default {PAPER_DRAG})"
+    )
+    model.add_argument("--mass", type=float, help="mass m, kg (default 2.37e-3)")
+    model.add_argument(
+        "--gap", type=float, help=f"gap 2a between the rackets, m; walls at +-gap/2 (default {PAPER_GAP})"
+    )
+    model.add_argument("--x0", type=float, help="initial position, m (default -gap/2, the lower racket)")
+    model.add_argument("--v0", type=float, help=f"initial velocity, m/s (default -1/{PAPER_DRAG})")
+    model.add_argument(
+        "--heaviside",
+        choices=("exact", "logistic", "softplus"),
+        default="exact",
+        help="Heaviside option (default exact)",
+    )
+    model.add_argument("--eps", type=float, help="smoothing width eps, m (required for logistic/softplus)")
+    run = p.add_argument_group("solver")
+    run.add_argument("--t1", type=float, default=2.0, help="end time, s (default 2.0)")
+    run.add_argument("--solver", choices=SOLVERS, default="tsit5", help="integrator (default tsit5)")
+    run.add_argument("--dt", type=float, help="rk4 step, s (default 1e-5); tsit5: first step")
+    run.add_argument("--rtol", type=float, default=1e-10, help="tsit5 relative tolerance (default 1e-10)")
+    run.add_argument("--atol", type=float, default=1e-10, help="tsit5 absolute tolerance (default 1e-10)")
+    out = p.add_argument_group("output")
+    out.add_argument(
+        "--samples",
+        type=int,
+        default=2001,
+        help="uniform output samples on [0, t1], ends included (default 2001)",
+    )
+    out.add_argument("--out", metavar="FILE.csv", help="write the samples as CSV with header t,x,v")
+    out.add_argument("--plot", metavar="FILE.png", help="draw x(t), v(t) and the phase diagram v(x)")
+    p.set_defaults(func=_run_simulate_ball)
+
+
+def _build_ball(args):
+    """The `Ball` and initial state (x0 [m], v0 [m/s]) that the flags describe."""
+    from ._ball import PAPER_DRAG, PAPER_GAP, Ball
+    from ._heaviside import heaviside
+    from ._validate import check_range
+
+    gap = PAPER_GAP if args.gap is None else args.gap
+    check_range("gap", gap, lo=0.0, lo_open=True, unit="m")
+    check_range("eps", args.eps, lo=0.0, lo_open=True, unit="m", allow_none=True)
+    overrides = dict(lower=-gap / 2, upper=gap / 2, heaviside=heaviside(args.heaviside, args.eps))
+    for name in ("kappa", "k_r", "mass"):
+        if getattr(args, name) is not None:
+            overrides[name] = getattr(args, name)
+    if args.drag is not None:
+        check_range("drag", args.drag, lo=0.0, unit="s/m")
+        overrides["drag"] = None if args.drag == 0 else args.drag
+    ball = Ball.table1(args.example, **overrides)
+    x0 = -gap / 2 if args.x0 is None else args.x0
+    v0 = -1.0 / PAPER_DRAG if args.v0 is None else args.v0
+    check_range("x0", x0, unit="m")
+    check_range("v0", v0, unit="m/s")
+    return ball, x0, v0
+
+
+def _check_outputs(args) -> None:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from ._io import check_output_path
+
+    for path in (args.out, args.plot):
+        if path is not None:
+            check_output_path(path)
+    if (
+        args.out is not None
+        and args.plot is not None
+        and os.path.abspath(args.out) == os.path.abspath(args.plot)
+    ):
+        raise ValueError(f"--out and --plot name the same file {args.out!r}")
+    if args.plot is not None:
+        suffix = os.path.splitext(args.plot)[1].lstrip(".").lower()
+        if suffix and suffix not in FigureCanvasAgg.get_supported_filetypes():
+            raise ValueError(
+                f"--plot {args.plot!r}: unsupported image format {suffix!r}; use e.g. .png, .pdf, .svg"
+            )
+
+
+def _contact_starts(contact, x):
+    """Contacts seen on the output grid: (total, lower, upper) from 0→1 switches and t0."""
+    on = np.asarray(contact) > 0.5
+    starts = np.flatnonzero(np.concatenate([on[:1], on[1:] & ~on[:-1]]))
+    upper = int(np.sum(np.asarray(x)[starts] > 0))
+    return len(starts), len(starts) - upper, upper
+
+
+def _located_contacts(events):
+    """Contacts located by the event mode: (total, lower, upper), a contact open at t0 included."""
+    count = int(events.count)
+    kind = np.asarray(events.kind)[:count]
+    wall = np.asarray(events.wall)[:count]
+    switches = kind[(kind == 1) | (kind == 2)]
+    walls = wall[(kind == 1) | (kind == 2)]
+    starts = list(walls[switches == 1])
+    if switches.size and switches[0] == 2:  # the run started in contact
+        starts.insert(0, walls[0])
+    upper = sum(1 for w in starts if w == 1)
+    return len(starts), len(starts) - upper, upper
+
+
+def _failure_message(status, args, ball) -> str:
+    from ._simulate import Status
+
+    if status == Status.NONFINITE and args.solver == "rk4":
+        t_c = math.pi * math.sqrt(float(ball.mass) / float(ball.kappa))
+        return (
+            f"the solution became non-finite (NaN or inf) with rk4 at dt = {args.dt:g} s: dt is beyond "
+            f"RK4's stability limit for this contact (contact time ~ pi*sqrt(m/kappa) = {t_c:.3g} s); "
+            f"decrease --dt (e.g. --dt {t_c / 100:.1g}) or use --solver tsit5"
+        )
+    if status == Status.NONFINITE:
+        return "the solution became non-finite (NaN or inf); check the parameters or tighten --rtol/--atol"
+    if status == Status.MAX_STEPS:
+        return (
+            f"the {args.solver} solver used all its steps before t1 = {args.t1:g} s; "
+            "shorten --t1, or loosen --rtol/--atol (tsit5), or increase --dt (rk4)"
+        )
+    return f"the {args.solver} solver failed before t1 = {args.t1:g} s (status {Status(status).name.lower()})"
+
+
+def _describe(args, ball, x0, v0) -> list[tuple[str, str]]:
+    overridden = any(getattr(args, n) is not None for n in ("kappa", "k_r"))
+    drag = "off" if ball.drag is None else f"k = {float(ball.drag):g} s/m"
+    k_r = "none" if ball.k_r is None else f"{float(ball.k_r):g} N*s/m"
+    hs = args.heaviside + ("" if args.eps is None else f", eps = {args.eps:g} m")
+    if args.heaviside == "exact" and args.eps is not None:
+        hs += " (ignored)"
+    if args.solver == "rk4":
+        solver = f"rk4, dt = {args.dt:g} s"
+    else:
+        solver = f"{args.solver}, rtol = {args.rtol:g}, atol = {args.atol:g}" + (
+            "" if args.dt is None else f", first step {args.dt:g} s"
+        )
+    return [
+        ("run", f"ball, {'based on ' if overridden else ''}Table 1 example {args.example}"),
+        (
+            "model",
+            f"kappa = {float(ball.kappa):g} N/m, k_r = {k_r}, m = {float(ball.mass):g} kg, "
+            f"g = {float(ball.gravity):g} m/s^2, drag {drag}",
+        ),
+        ("walls", f"lower = {float(ball.lower):g} m, upper = {float(ball.upper):g} m"),
+        ("initial", f"x0 = {float(x0)!r} m, v0 = {float(v0)!r} m/s"),
+        ("heaviside", hs),
+        ("solver", solver),
+        ("time", f"[0, {args.t1:g}] s, {args.samples} samples"),
+    ]
+
+
+def _run_simulate_ball(args) -> int:
+    from ._simulate import Status, simulate
+
+    if args.solver == "rk4" and args.dt is None:
+        args.dt = 1e-5
+    ball, x0, v0 = _build_ball(args)
+    _check_outputs(args)
+    if not isinstance(args.samples, int) or args.samples < 2:
+        raise ValueError(f"samples = {args.samples!r} is out of range; valid range is integers >= 2")
+
+    start = time.perf_counter()
+    sol = simulate(
+        ball,
+        [x0, v0],
+        args.t1,
+        solver=args.solver,
+        dt=args.dt,
+        rtol=args.rtol,
+        atol=args.atol,
+        samples=args.samples,
+        outputs=("x", "v", "contact"),
+        throw=False,
+    )
+    status = int(sol.status)  # waits for the result
+    wall = time.perf_counter() - start
+    if status != Status.SUCCESS:
+        raise RunError(_failure_message(status, args, ball))
+
+    ts, x, v = (np.asarray(a, dtype=float) for a in (sol.ts, sol["x"], sol["v"]))
+    if sol.events is not None:
+        n, lower, upper = _located_contacts(sol.events)
+        where = "located"
+    else:
+        n, lower, upper = _contact_starts(sol["contact"], x)
+        where = "on the output grid"
+    x1, v1 = (float(a) for a in np.asarray(sol.y1))
+    lines = _describe(args, ball, x0, v0) + [
+        (
+            "steps",
+            f"{int(sol.num_steps)} (accepted {int(sol.num_accepted_steps)}, rejected {int(sol.num_rejected_steps)})",
+        ),
+        ("wall time", f"{wall:.3f} s (including JIT compilation)"),
+        ("contacts", f"{n} {where} ({lower} lower, {upper} upper)"),
+        ("final", f"x(t1) = {x1!r} m, v(t1) = {v1!r} m/s"),
+    ]
+    try:
+        if args.out is not None:
+            from ._io import write_csv
+
+            write_csv(args.out, ("t", "x", "v"), (ts, x, v))
+            lines.append(("wrote", f"{args.out} (CSV t,x,v: {len(ts)} rows)"))
+        if args.plot is not None:
+            from ._plot import plot_ball, save_figure
+
+            summary = dict(lines)
+            title = (
+                f"{summary['run'][:1].upper()}{summary['run'][1:]}: {summary['model']}\n"
+                f"{summary['walls']}; {summary['heaviside']} Heaviside; {summary['solver']}"
+            )
+            fig = plot_ball(ts, x, v, walls=(float(ball.lower), float(ball.upper)), title=title)
+            save_figure(fig, args.plot)
+            lines.append(("wrote", f"{args.plot} (x(t), v(t), v(x))"))
+    except OSError as err:
+        raise RunError(f"cannot write output: {err}") from None
+    for key, value in lines:
+        print(f"{key:<10} {value}")
+    return EXIT_OK
+
+
+# -- command table -------------------------------------------------------------------
+
+#: `simulate <model>`: one function per model that adds its parser.
+_SIMULATE_MODELS = (_add_simulate_ball,)
+
+
+def _add_simulate(commands) -> None:
+    p = commands.add_parser(
+        "simulate", help="simulate a model and print a summary", description="Simulate a model."
+    )
+    models = p.add_subparsers(dest="model", metavar="MODEL", required=True, parser_class=_Parser)
+    for add in _SIMULATE_MODELS:
+        add(models)
+
+
+#: Top-level commands: one function per command that adds its parser.
+_COMMANDS = (_add_simulate,)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full argument parser (errors raise `UsageError`)."""
+    from . import __version__
+
+    parser = _Parser(
+        prog=PROG, description="Differentiable simulation of systems with unilateral constraints [K90]."
+    )
+    parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_Parser)
+    for add in _COMMANDS:
+        add(commands)
+    return parser
+
+
+def _fail(message: str, code: int) -> int:
+    print(f"{PROG}: error: {_one_line(message)}", file=sys.stderr)
+    return code
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line with `argv` (default: `sys.argv[1:]`); return the exit code."""
+    try:
+        args = build_parser().parse_args(argv)
+        return int(args.func(args))
+    except SystemExit as exc:  # --help, --version
+        return exc.code if isinstance(exc.code, int) else EXIT_OK if exc.code is None else EXIT_USAGE
+    except (UsageError, ValueError) as err:
+        return _fail(str(err), EXIT_USAGE)
+    except RunError as err:
+        return _fail(str(err), EXIT_RUNTIME)
+    except RuntimeError as err:  # EquinoxRuntimeError / JaxRuntimeError from the solver
+        text = str(err)
+        ours = [line for line in text.splitlines() if "jaxunilat" in line]
+        return _fail((ours or text.splitlines() or [type(err).__name__])[0], EXIT_RUNTIME)
+    except KeyboardInterrupt:
+        return _fail("interrupted", 130)

@@ -1,0 +1,74 @@
+"""Plain-text output: CSV files of sampled time series.
+
+Writers are generic (a header and equal-length columns) and refuse to write where
+they should not: into a directory, under a missing directory, or over an input file.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+
+
+def check_output_path(path: str | os.PathLike, *, inputs: Iterable[str | os.PathLike] = ()) -> None:
+    """Raise `ValueError` unless `path` can be written as a new or replaced file.
+
+    **Arguments:**
+
+    - `path`: the file to write.
+    - `inputs`: files this run reads; `path` must not be one of them.
+    """
+    path = os.fspath(path)
+    if os.path.isdir(path):
+        raise ValueError(f"output path {path!r} is a directory; give a file name")
+    parent = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(parent):
+        raise ValueError(f"output path {path!r}: the directory {parent!r} does not exist")
+    if os.path.exists(path):
+        for src in inputs:
+            if os.path.exists(src) and os.path.samefile(path, src):
+                raise ValueError(f"output path {path!r} is an input file; refusing to overwrite it")
+
+
+def write_csv(
+    path: str | os.PathLike,
+    header: Sequence[str],
+    columns: Sequence,
+    *,
+    fmt: str = "%.17g",
+    inputs: Iterable[str | os.PathLike] = (),
+) -> None:
+    """Write columns of numbers as a CSV file with a one-line header.
+
+    **Arguments:**
+
+    - `path`: the file to write (replaced if it exists, unless it is an input).
+    - `header`: the column names, e.g. `("t", "x", "v")`; written as `t,x,v`.
+    - `columns`: one 1-D array per name, all the same length (the values in their
+      own units: s, m, m/s, ...).
+    - `fmt`: the number format; the default `%.17g` round-trips float64 exactly.
+    - `inputs`: files this run reads, never to be overwritten.
+    """
+    check_output_path(path, inputs=inputs)
+    header = [str(h) for h in header]
+    if len(header) != len(columns):
+        raise ValueError(f"header has {len(header)} names but {len(columns)} columns were given")
+    if any("," in h for h in header):
+        raise ValueError(f"header = {header!r}: column names must not contain commas")
+    arrays = [np.asarray(c, dtype=float).ravel() for c in columns]
+    if len({len(a) for a in arrays}) > 1:
+        raise ValueError(f"columns must all have the same length, got {[len(a) for a in arrays]}")
+    data = np.column_stack(arrays)
+    np.savetxt(path, data, fmt=fmt, delimiter=",", header=",".join(header), comments="")
+
+
+def read_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """Read a CSV written by `write_csv`: a dict column name → float64 array."""
+    with open(path) as f:
+        header = f.readline().strip().split(",")
+    data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    if data.shape[1] != len(header):
+        raise ValueError(f"{os.fspath(path)!r}: {len(header)} header names but {data.shape[1]} columns")
+    return {name: data[:, i] for i, name in enumerate(header)}

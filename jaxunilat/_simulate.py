@@ -1,0 +1,270 @@
+"""`simulate`: the package's one jitted entry point."""
+
+from __future__ import annotations
+
+import enum
+from collections import Counter
+
+import diffrax as dfx
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike
+
+from ._event import EventRecord, event_solve
+from ._heaviside import Exact
+from ._model import AbstractModel
+from ._solvers import SolverSettings, make_settings
+from ._validate import check_choice, check_range, is_concrete
+
+#: How many times each jitted function was traced (compiled). Tests and the
+#: benchmark read it to prove that new parameter values do not retrace.
+_TRACES: Counter = Counter()
+
+
+def trace_counts() -> dict[str, int]:
+    """How many times each jitted entry point has been traced in this process."""
+    return dict(_TRACES)
+
+
+class Status(enum.IntEnum):
+    """Outcome of a run, stored as `Solution.status`."""
+
+    SUCCESS = 0
+    MAX_STEPS = 1
+    NONFINITE = 2
+    SOLVER_FAILED = 3
+    EVENT_OVERFLOW = 4
+
+
+def _messages(settings: SolverSettings) -> list[str]:
+    if settings.method == "rk4":
+        steps_hint = "increase max_steps or dt"
+        nonfinite_hint = (
+            "the fixed step dt is probably beyond RK4's stability limit for this contact "
+            "stiffness (contact time ~ pi*sqrt(m/kappa)); decrease dt, or use solver='tsit5'"
+        )
+    else:
+        steps_hint = "increase max_steps, loosen rtol/atol, or shorten the time span"
+        nonfinite_hint = "check the parameters for NaN/inf, or tighten rtol/atol"
+    return [
+        f"jaxunilat.simulate: the solver used all max_steps = {settings.max_steps} steps "
+        f"before t1 ({settings.method}); {steps_hint}.",
+        f"jaxunilat.simulate: the solution became non-finite (NaN or inf); {nonfinite_hint}.",
+        f"jaxunilat.simulate: the {settings.method} solver failed (diffrax reported an error "
+        "other than max_steps); pass throw=False to inspect the partial result.",
+        f"jaxunilat.simulate: more than max_events = {settings.max_events} events (entries, exits, "
+        "apexes, deepest points); increase max_events or shorten the time span.",
+    ]
+
+
+class Solution(eqx.Module):
+    """The result of `simulate`.
+
+    **Fields:**
+
+    - `ts`: the save times, s.
+    - `ys`: a dict of the requested outputs, each an array over `ts`
+      (x in m, v in m/s, force in N, penetration in m, energy in J, contact in {0, 1}).
+    - `y1`: the state at t1.
+    - `status`: a `Status` code (0 = success).
+    - `num_steps`, `num_accepted_steps`, `num_rejected_steps`: solver statistics.
+    - `events`: the event mode's `EventRecord` (contact entries and exits, apexes,
+      deepest points); `None` for the other solvers.
+    """
+
+    ts: Array
+    ys: dict[str, Array]
+    y1: Array
+    status: Array
+    num_steps: Array
+    num_accepted_steps: Array
+    num_rejected_steps: Array
+    events: EventRecord | None = None
+
+    def __getitem__(self, name: str) -> Array:
+        return self.ys[name]
+
+    @property
+    def ok(self) -> bool:
+        """True when every run in the (possibly batched) result succeeded."""
+        return bool(np.all(np.asarray(self.status) == Status.SUCCESS))
+
+    @property
+    def message(self) -> str:
+        """A human-readable description of the status (concrete results only)."""
+        codes = sorted({int(c) for c in np.asarray(self.status).ravel()})
+        return "; ".join(Status(c).name.lower() for c in codes)
+
+
+def _finish(ys, y1, status, settings, throw, ts, stats, events=None):
+    if throw:
+        ys = eqx.branched_error_if(
+            ys, status != Status.SUCCESS, jnp.maximum(status - 1, 0), _messages(settings)
+        )
+    return Solution(
+        ts=ts,
+        ys=ys,
+        y1=y1,
+        status=status,
+        num_steps=stats["num_steps"],
+        num_accepted_steps=stats["num_accepted_steps"],
+        num_rejected_steps=stats["num_rejected_steps"],
+        events=events,
+    )
+
+
+@eqx.filter_jit
+def _solve(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[str, ...], throw: bool):
+    _TRACES["simulate"] += 1
+    if settings.method == "event":
+        ys, y1, done, nonfinite, overflow, stats, events = event_solve(
+            model, y0, t0, t1, ts, settings, outputs
+        )
+        finite = jnp.all(jnp.isfinite(y1))
+        status = jnp.where(
+            nonfinite | ~finite,
+            Status.NONFINITE,
+            jnp.where(overflow, Status.EVENT_OVERFLOW, jnp.where(done, Status.SUCCESS, Status.MAX_STEPS)),
+        ).astype(jnp.int32)
+        return _finish(ys, y1, status, settings, throw, ts, stats, events)
+
+    def save_fn(t, y, args):
+        return {name: args.output(name, t, y) for name in outputs}
+
+    saveat = dfx.SaveAt(subs=[dfx.SubSaveAt(ts=ts, fn=save_fn), dfx.SubSaveAt(t1=True)])
+    sol = dfx.diffeqsolve(
+        dfx.ODETerm(lambda t, y, args: args.vector_field(t, y)),
+        settings.diffrax_solver(),
+        t0,
+        t1,
+        settings.dt,
+        y0,
+        args=model,
+        saveat=saveat,
+        stepsize_controller=settings.controller(),
+        max_steps=settings.max_steps,
+        throw=False,
+    )
+    ys, y1 = sol.ys[0], sol.ys[1][0]
+    finite = jnp.all(jnp.isfinite(y1))
+    for value in ys.values():
+        finite = finite & jnp.all(jnp.isfinite(value))
+    ok = sol.result == dfx.RESULTS.successful
+    steps = sol.result == dfx.RESULTS.max_steps_reached
+    status = jnp.where(
+        ok,
+        jnp.where(finite, Status.SUCCESS, Status.NONFINITE),
+        jnp.where(steps, Status.MAX_STEPS, jnp.where(finite, Status.SOLVER_FAILED, Status.NONFINITE)),
+    ).astype(jnp.int32)
+    return _finish(ys, y1, status, settings, throw, ts, sol.stats)
+
+
+def _time_span(t_span):
+    if isinstance(t_span, (tuple, list)):
+        if len(t_span) != 2:
+            raise ValueError(f"t_span = {t_span!r} must be t1 or a pair (t0, t1), in s")
+        t0, t1 = t_span
+    else:
+        t0, t1 = 0.0, t_span
+    check_range("t0", t0, unit="s")
+    check_range("t1", t1, unit="s")
+    if is_concrete(t0) and is_concrete(t1) and not float(t1) > float(t0):
+        raise ValueError(f"t1 = {float(t1):g} s is out of range; valid range is t1 > t0 = {float(t0):g} s")
+    return jnp.asarray(t0, dtype=float), jnp.asarray(t1, dtype=float)
+
+
+def simulate(
+    model: AbstractModel,
+    y0: ArrayLike,
+    t_span,
+    *,
+    solver: str = "tsit5",
+    dt: ArrayLike | None = None,
+    rtol: ArrayLike = 1e-8,
+    atol: ArrayLike = 1e-8,
+    max_steps: int | None = None,
+    max_events: int = 2048,
+    dtmax: ArrayLike | None = None,
+    ts: ArrayLike | None = None,
+    samples: int = 1001,
+    outputs: tuple[str, ...] = ("x", "v"),
+    throw: bool = True,
+) -> Solution:
+    """Integrate a model from y0 over a time span and save the requested outputs.
+
+    **Arguments:**
+
+    - `model`: a model such as `Ball.table1(2)`: parameters (traced) and structure (static).
+    - `y0`: the initial state, e.g. (x0 [m], v0 [m/s]) for the ball.
+    - `t_span`: t1, or a pair (t0, t1), in s.
+    - `solver`: `"rk4"` (the paper's fixed-step method, needs `dt`), `"tsit5"`
+      (adaptive, PID step control with `rtol`, `atol`) or `"event"` (the exact
+      model with every contact entry and exit located, integrated piecewise with
+      Tsit5 at `rtol`, `atol`; correct gradients through impacts; needs
+      `heaviside=Exact()`).
+    - `dt`: the RK4 step, s (for the adaptive methods: an optional first step).
+    - `rtol`, `atol`: the adaptive methods' tolerances.
+    - `max_steps`: the step budget (see `SolverSettings`).
+    - `max_events`: the event mode's event buffer size.
+    - `dtmax`: the event mode's largest step, s.
+    - `ts`: save times, s, sorted within [t0, t1]. Default: `samples` uniform
+      times over [t0, t1], both ends included.
+    - `outputs`: which outputs to save, from `model.output_names`
+      (ball: x, v, force, penetration, energy, contact). Only these are stored.
+    - `throw`: raise on failure (max_steps exhausted, non-finite values) with a
+      message that says what to change. With `throw=False` the result's
+      `status` says what happened instead.
+
+    **Returns:** a `Solution`.
+
+    Changing only parameter values (model leaves, y0, t_span, ts, dt, rtol, atol)
+    does not retrace. Batch with `jax.vmap`, differentiate with `jax.grad`
+    (use a smooth Heaviside option for meaningful gradients of the penalty model).
+    """
+    if not isinstance(model, AbstractModel):
+        raise ValueError(f"model = {model!r} is not a jaxunilat model (e.g. Ball.table1(2))")
+    outputs = tuple(outputs)
+    if not outputs:
+        raise ValueError("outputs = () is empty; request at least one of " + ", ".join(model.output_names))
+    for name in outputs:
+        check_choice("output", name, model.output_names)
+    y0 = jnp.asarray(y0, dtype=float)
+    if y0.shape != (len(model.state_names),):
+        raise ValueError(
+            f"y0 has shape {y0.shape}; expected ({len(model.state_names)},) for the state "
+            f"({', '.join(model.state_names)})"
+        )
+    check_range("y0", y0)
+    t0, t1 = _time_span(t_span)
+    if ts is None:
+        if not isinstance(samples, (int, np.integer)) or samples < 2:
+            raise ValueError(f"samples = {samples!r} is out of range; valid range is integers >= 2")
+        ts = jnp.linspace(t0, t1, int(samples))
+    else:
+        ts = jnp.asarray(ts, dtype=float)
+        if ts.ndim != 1 or ts.shape[0] < 1:
+            raise ValueError(f"ts has shape {ts.shape}; expected a non-empty 1-D array of times in s")
+        if is_concrete(ts) and is_concrete(t0) and is_concrete(t1):
+            arr = np.asarray(ts)
+            if np.any(np.diff(arr) < 0) or arr[0] < float(t0) or arr[-1] > float(t1):
+                raise ValueError(f"ts must be sorted within [t0, t1] = [{float(t0):g}, {float(t1):g}] s")
+    if solver == "event":
+        if not isinstance(getattr(model, "heaviside", Exact()), Exact):
+            raise ValueError(
+                f"heaviside = {type(model.heaviside).__name__} is not supported with solver='event'; "
+                "the event mode solves the exact model: use heaviside=Exact()"
+            )
+        if not hasattr(model, "switches"):
+            raise ValueError(f"solver = 'event' is not supported for {type(model).__name__}")
+    settings = make_settings(
+        solver,
+        t1 - t0,
+        dt=dt,
+        rtol=rtol,
+        atol=atol,
+        max_steps=max_steps,
+        max_events=max_events,
+        dtmax=dtmax,
+    )
+    return _solve(model, y0, t0, t1, ts, settings, outputs, bool(throw))

@@ -1,0 +1,138 @@
+"""Solver settings: classic fixed-step RK4 and adaptive Tsit5 with a PID controller."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import ClassVar
+
+import diffrax as dfx
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array
+
+from ._validate import check_choice, check_range, is_concrete
+
+_rk4_tableau = dfx.ButcherTableau(
+    a_lower=(
+        np.array([0.5]),
+        np.array([0.0, 0.5]),
+        np.array([0.0, 0.0, 1.0]),
+    ),
+    b_sol=np.array([1 / 6, 1 / 3, 1 / 3, 1 / 6]),
+    # Classic RK4 has no embedded method: it is only used with constant steps.
+    b_error=np.zeros(4),
+    c=np.array([0.5, 0.5, 1.0]),
+)
+
+
+class RK4(dfx.AbstractERK):
+    """The classic 4th-order Runge–Kutta method (Kutta 1901), as used in [K90].
+
+    Four stages, no embedded error estimate: use it with constant steps only.
+    diffrax ships no classic RK4, so the Butcher tableau is defined here.
+    """
+
+    tableau: ClassVar[dfx.ButcherTableau] = _rk4_tableau
+    interpolation_cls: ClassVar[Callable[..., dfx.ThirdOrderHermitePolynomialInterpolation]] = (
+        dfx.ThirdOrderHermitePolynomialInterpolation.from_k
+    )
+
+    def order(self, terms):
+        del terms
+        return 4
+
+
+SOLVERS = ("rk4", "tsit5", "event")
+
+
+class SolverSettings(eqx.Module):
+    """How to integrate: the method and its settings.
+
+    **Arguments:**
+
+    - `method`: `"rk4"` (fixed step `dt`), `"tsit5"` (adaptive, PID controller) or
+      `"event"` (exact contact, located: see `jaxunilat._event`).
+    - `dt`: the RK4 step, s; for Tsit5 and the event mode an optional first step.
+    - `rtol`, `atol`: the adaptive methods' relative and absolute tolerances.
+    - `max_steps`: the step budget (static). `None` picks ⌈span/dt⌉ + 16 for RK4,
+      200 000 for Tsit5 and 16 384 for the event mode.
+    - `pcoeff`, `icoeff`: the PID controller's proportional and integral gains.
+    - `max_events`: the event mode's event buffer (static): entries, exits, apexes
+      and deepest points. Default 2048.
+    - `subgrid`: how many points per step the event mode checks for crossings
+      (static, besides the observable's extremum). Default 4.
+    - `dtmax`: the event mode's largest step, s (`None`: no cap).
+    """
+
+    method: str = eqx.field(static=True)
+    max_steps: int = eqx.field(static=True)
+    dt: Array | None
+    rtol: Array
+    atol: Array
+    pcoeff: float = eqx.field(static=True, default=0.0)
+    icoeff: float = eqx.field(static=True, default=1.0)
+    max_events: int = eqx.field(static=True, default=2048)
+    subgrid: int = eqx.field(static=True, default=4)
+    dtmax: Array | None = None
+
+    def diffrax_solver(self):
+        return RK4() if self.method == "rk4" else dfx.Tsit5()
+
+    def controller(self):
+        if self.method == "rk4":
+            return dfx.ConstantStepSize()
+        return dfx.PIDController(rtol=self.rtol, atol=self.atol, pcoeff=self.pcoeff, icoeff=self.icoeff)
+
+
+def make_settings(
+    method: str,
+    span,
+    *,
+    dt=None,
+    rtol=1e-8,
+    atol=1e-8,
+    max_steps: int | None = None,
+    max_events: int = 2048,
+    subgrid: int = 4,
+    dtmax=None,
+) -> SolverSettings:
+    """Validate the solver arguments and build `SolverSettings`."""
+    check_choice("solver", method, SOLVERS)
+    check_range("rtol", rtol, lo=0.0, hi=1.0, lo_open=True)
+    check_range("atol", atol, lo=0.0, lo_open=True)
+    check_range("dt", dt, lo=0.0, lo_open=True, unit="s", allow_none=method != "rk4")
+    if max_steps is not None:
+        if not isinstance(max_steps, (int, np.integer)) or max_steps < 1:
+            raise ValueError(f"max_steps = {max_steps!r} is out of range; valid range is integers >= 1")
+        max_steps = int(max_steps)
+    elif method == "rk4":
+        if not (is_concrete(dt) and is_concrete(span)):
+            raise ValueError("max_steps must be given when dt or the time span is traced (rk4)")
+        max_steps = int(math.ceil(float(span) / float(jnp.min(jnp.asarray(dt))))) + 16
+    elif method == "event":
+        max_steps = 16_384
+    else:
+        max_steps = 200_000
+    for name, value, low in (("max_events", max_events, 1), ("subgrid", subgrid, 1)):
+        if not isinstance(value, (int, np.integer)) or value < low:
+            raise ValueError(f"{name} = {value!r} is out of range; valid range is integers >= {low}")
+    check_range("dtmax", dtmax, lo=0.0, lo_open=True, unit="s", allow_none=True)
+    if method == "rk4" and is_concrete(dt) and is_concrete(span):
+        needed = math.ceil(float(span) / float(np.min(np.asarray(dt))))
+        if needed > max_steps:
+            raise ValueError(
+                f"max_steps = {max_steps} is too small for rk4: (t1 - t0)/dt = {needed} steps; "
+                "increase max_steps or dt"
+            )
+    return SolverSettings(
+        method=method,
+        max_steps=max_steps,
+        dt=None if dt is None else jnp.asarray(dt, dtype=float),
+        rtol=jnp.asarray(rtol, dtype=float),
+        atol=jnp.asarray(atol, dtype=float),
+        max_events=int(max_events),
+        subgrid=int(subgrid),
+        dtmax=None if dtmax is None else jnp.asarray(dtmax, dtype=float),
+    )

@@ -1,0 +1,28 @@
+"""Test set-up: float64, this directory on sys.path (for `reference`, `helpers`), shared fixtures."""
+
+import os
+import sys
+
+import jax
+import pytest
+
+jax.config.update("jax_enable_x64", True)
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from helpers import PAPER_Y0, tsit5  # noqa: E402
+from reference import BallParams, scipy_reference  # noqa: E402
+
+import jaxunilat  # noqa: E402
+
+
+@pytest.fixture(scope="session")
+def ref_ex2():
+    """scipy DOP853 + events reference for Table 1 example 2 on [0, 2] s."""
+    return scipy_reference(BallParams.table1(2), PAPER_Y0, 2.0)
+
+
+@pytest.fixture(scope="session")
+def sim_ex2():
+    """The package's Tsit5 (exact Heaviside, tolerance 1e-10) for example 2 on [0, 2] s."""
+    return tsit5(jaxunilat.Ball.table1(2), PAPER_Y0, 2.0)

@@ -1,0 +1,150 @@
+"""The command line: files written, summaries printed, one-line errors with exit code 2."""
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from reference import BallParams, scipy_reference
+
+from jaxunilat._cli import main
+
+
+def _run(args, capsys):
+    code = main(args)
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_simulate_ball_writes_csv_and_png(tmp_path, capsys):
+    csv, png = tmp_path / "run.csv", tmp_path / "run.png"
+    code, out, err = _run(
+        [
+            "simulate",
+            "ball",
+            "--example",
+            "2",
+            "--t1",
+            "0.5",
+            "--samples",
+            "501",
+            "--out",
+            str(csv),
+            "--plot",
+            str(png),
+        ],
+        capsys,
+    )
+    assert code == 0, err
+    lines = csv.read_text().splitlines()
+    assert lines[0] == "t,x,v"
+    data = np.loadtxt(csv, delimiter=",", skiprows=1)
+    assert data.shape == (501, 3)
+    assert data[0, 0] == 0.0 and data[-1, 0] == pytest.approx(0.5, abs=0)
+    assert np.allclose(np.diff(data[:, 0]), 0.001)
+    # The trajectory in the file is the physical one (independent scipy reference).
+    ref_x, _ = scipy_reference(BallParams.table1(2), (-0.4, -1 / 0.122), 0.5)(data[:, 0])
+    assert np.max(np.abs(data[:, 1] - ref_x)) < 1e-5
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert png.stat().st_size > 10_000
+    assert "contacts" in out and "steps" in out and "final" in out
+
+
+def test_event_solver_counts_located_contacts(capsys):
+    code, out, err = _run(["simulate", "ball", "--solver", "event", "--t1", "2", "--samples", "11"], capsys)
+    assert code == 0, err
+    # SPEC §2.2 (trusted reference): 8 contacts over [0, 2] s, 3 of them upper.
+    assert "8 located (5 lower, 3 upper)" in out
+
+
+def test_flags_override_example(tmp_path, capsys):
+    csv = tmp_path / "run.csv"
+    code, _, err = _run(
+        [
+            "simulate",
+            "ball",
+            "--example",
+            "1",
+            "--kappa",
+            "2e4",
+            "--k-r",
+            "0.05",
+            "--drag",
+            "0",
+            "--gap",
+            "0.6",
+            "--x0",
+            "0",
+            "--v0",
+            "3",
+            "--t1",
+            "0.4",
+            "--samples",
+            "41",
+            "--out",
+            str(csv),
+        ],
+        capsys,
+    )
+    assert code == 0, err
+    data = np.loadtxt(csv, delimiter=",", skiprows=1)
+    params = BallParams(kappa=2e4, k_r=0.05, drag=None, lower=-0.3, upper=0.3)
+    ref_x, _ = scipy_reference(params, (0.0, 3.0), 0.4)(data[:, 0])
+    assert np.max(np.abs(data[:, 1] - ref_x)) < 1e-5
+
+
+BAD = [
+    ["simulate", "ball", "--mass", "-1"],
+    ["simulate", "ball", "--gap", "0"],
+    ["simulate", "ball", "--heaviside", "logistic"],
+    ["simulate", "ball", "--heaviside", "softplus", "--eps", "0"],
+    ["simulate", "ball", "--solver", "rk4", "--dt", "0"],
+    ["simulate", "ball", "--t1", "0"],
+    ["simulate", "ball", "--kappa", "nan"],
+    ["simulate", "ball", "--solver", "euler"],
+    ["simulate", "ball", "--samples", "1"],
+    ["simulate", "ball", "--example", "7"],
+    ["simulate", "ball", "--no-such-flag"],
+    ["simulate", "ball", "--kappa", "abc"],
+    ["simulate"],
+    [],
+]
+
+
+@pytest.mark.parametrize("argv", BAD, ids=lambda a: " ".join(a) or "<none>")
+def test_bad_flags_exit_2_with_one_line(argv, capsys):
+    code, out, err = _run(argv, capsys)
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("jaxunilat: error:")
+    assert "Traceback" not in err
+
+
+def test_output_path_checks(tmp_path, capsys):
+    code, _, err = _run(["simulate", "ball", "--out", str(tmp_path)], capsys)
+    assert code == 2 and "directory" in err
+    code, _, err = _run(["simulate", "ball", "--out", str(tmp_path / "missing" / "x.csv")], capsys)
+    assert code == 2 and "does not exist" in err
+
+
+def test_unstable_rk4_is_a_clear_runtime_error(tmp_path, capsys):
+    csv = tmp_path / "x.csv"
+    code, _, err = _run(["simulate", "ball", "--solver", "rk4", "--dt", "3e-3", "--out", str(csv)], capsys)
+    assert code == 1
+    assert len(err.strip().splitlines()) == 1 and "--dt" in err
+    assert not csv.exists()
+
+
+def test_console_script_module_entry_point():
+    env = dict(os.environ, MPLBACKEND="Agg")
+    proc = subprocess.run(
+        [sys.executable, "-m", "jaxunilat", "simulate", "ball", "--mass", "0"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
+    assert proc.returncode == 2
+    assert proc.stderr.count("\n") == 1 and "mass" in proc.stderr

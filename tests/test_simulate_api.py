@@ -1,0 +1,179 @@
+"""`simulate`: compilation reuse, vmap, gradients, outputs, failure reporting, input checks."""
+
+import os
+import subprocess
+import sys
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import PAPER_Y0, SAMPLES, arrays, rk4, tsit5
+
+import jaxunilat
+
+KAPPAS = np.array([5e3, 7e3, 1e4, 1.3e4, 1.6e4, 2e4, 2.5e4, 3e4])
+K_RS = np.linspace(0.05, 0.4, 8)
+
+
+def _traces():
+    return jaxunilat.trace_counts().get("simulate", 0)
+
+
+def test_no_retrace_when_only_values_change(sim_ex2):
+    del sim_ex2  # compiled the shared configuration
+    before = _traces()
+    tsit5(jaxunilat.Ball(2e4, 0.1), (-0.3, -2.0), 0.5)
+    tsit5(jaxunilat.Ball.table1(4), PAPER_Y0, 1.0, tol=1e-8)
+    tsit5(jaxunilat.Ball(7e3, 0.35, mass=3e-3, lower=-0.2, upper=0.3), (0.0, 1.0), 0.25)
+    assert _traces() == before
+
+
+def test_selected_outputs_only_and_counter_counts():
+    before = _traces()
+    names = ("force", "contact", "penetration")
+    sol = jaxunilat.simulate(jaxunilat.Ball.table1(2), PAPER_Y0, 0.01, samples=101, outputs=names)
+    assert _traces() == before + 1  # a new structure does trace: the counter is live
+    assert set(sol.ys) == set(names)
+    for name in names:
+        assert sol[name].shape == (101,)
+    force, contact, pen = arrays(sol, *names)
+    assert set(np.unique(contact)) <= {0.0, 1.0}
+    assert np.any(contact == 1) and np.any(contact == 0)
+    np.testing.assert_array_equal(contact == 1, pen > 0)
+    assert np.all(force[contact == 0] == 0)  # exact Heaviside: no force in flight
+    assert np.all(pen >= 0) and np.max(pen) < 5e-3
+    np.testing.assert_allclose(np.asarray(sol.ts), np.linspace(0, 0.01, 101), rtol=0, atol=1e-15)
+
+
+def test_vmap_equals_separate_runs_rk4():
+    # Fixed steps: the batched run does the same arithmetic as 8 separate runs, up to
+    # rounding (v swings by ~16 m/s within 1.5 ms, hence its looser absolute bound).
+    def run(kappa, k_r):
+        return rk4(jaxunilat.Ball(kappa, k_r), PAPER_Y0, 0.3, 1e-5)
+
+    batch = jax.vmap(run)(jnp.asarray(KAPPAS), jnp.asarray(K_RS))
+    assert batch.ys["x"].shape == (8, SAMPLES)
+    for i in range(8):
+        one = run(KAPPAS[i], K_RS[i])
+        assert int(one.status) == int(batch.status[i]) == jaxunilat.Status.SUCCESS
+        assert np.max(np.abs(np.asarray(one.ys["x"]) - np.asarray(batch.ys["x"][i]))) <= 1e-12
+        assert np.max(np.abs(np.asarray(one.ys["v"]) - np.asarray(batch.ys["v"][i]))) <= 1e-10
+    # The 8 parameter sets really give 8 different trajectories.
+    assert np.min(np.ptp(np.asarray(batch.ys["x"])[:, -1])) > 1e-3
+
+
+def test_vmap_equals_separate_runs_tsit5():
+    # Adaptive steps: rounding differences between batched and unbatched XLA kernels can
+    # flip an accept/reject decision at a contact kink, so runs agree to the solver's
+    # accuracy (~3e-7 m against the reference at tol 1e-10), not to rounding. Measured: 2e-8 m.
+    def run(kappa, k_r):
+        return tsit5(jaxunilat.Ball(kappa, k_r), PAPER_Y0, 0.3)
+
+    batch = jax.vmap(run)(jnp.asarray(KAPPAS), jnp.asarray(K_RS))
+    for i in range(8):
+        one = run(KAPPAS[i], K_RS[i])
+        assert np.max(np.abs(np.asarray(one.ys["x"]) - np.asarray(batch.ys["x"][i]))) <= 1e-7
+
+
+def _smooth_loss(log_params, t1=0.15):
+    model = jaxunilat.Ball(jnp.exp(log_params[0]), jnp.exp(log_params[1]), heaviside=jaxunilat.Softplus(1e-5))
+    sol = tsit5(model, PAPER_Y0, t1)
+    return jnp.mean(sol.ys["x"] ** 2)
+
+
+def test_grad_through_smooth_heaviside_matches_finite_difference():
+    # [0, 0.15] s covers the lower contact at t = 0 and the upper one at 0.1217 s.
+    p = jnp.log(jnp.array([1e4, 0.2]))
+    grad = np.asarray(jax.grad(_smooth_loss)(p))
+    assert np.all(np.isfinite(grad))
+    h = 1e-3
+    for j in range(2):
+        dp = jnp.zeros(2).at[j].set(h)
+        fd = (float(_smooth_loss(p + dp)) - float(_smooth_loss(p - dp))) / (2 * h)
+        assert abs(fd) > 1e-6  # the loss does depend on the parameter
+        assert grad[j] == pytest.approx(fd, rel=1e-3)
+
+
+def test_rk4_beyond_stability_reports_nonfinite():
+    sol = rk4(jaxunilat.Ball.table1(2), PAPER_Y0, 2.0, 3e-3)
+    assert int(sol.status) == jaxunilat.Status.NONFINITE
+    assert not sol.ok
+    with pytest.raises(RuntimeError, match="dt"):
+        jaxunilat.simulate(
+            jaxunilat.Ball.table1(2), PAPER_Y0, 2.0, solver="rk4", dt=3e-3, samples=2, outputs=("x",)
+        )
+
+
+def test_tiny_max_steps_reports_max_steps():
+    sol = jaxunilat.simulate(
+        jaxunilat.Ball.table1(2), PAPER_Y0, 2.0, max_steps=16, samples=2, outputs=("x",), throw=False
+    )
+    assert int(sol.status) == jaxunilat.Status.MAX_STEPS
+    assert not sol.ok
+
+
+@pytest.mark.parametrize(
+    "make, name",
+    [
+        (lambda: jaxunilat.Ball(1e4, mass=-1.0), "mass"),
+        (lambda: jaxunilat.Ball(0.0), "kappa"),
+        (lambda: jaxunilat.Ball(-1e4), "kappa"),
+        (lambda: jaxunilat.Ball(float("nan")), "kappa"),
+        (lambda: jaxunilat.Ball(1e4, lower=0.4, upper=0.4), "gap"),
+        (lambda: jaxunilat.Ball(1e4, lower=0.4, upper=-0.4), "gap"),
+        (lambda: jaxunilat.Ball(1e4, k_r=-0.1), "k_r"),
+        (lambda: jaxunilat.Logistic(0.0), "eps"),
+        (lambda: jaxunilat.Softplus(-1e-5), "eps"),
+        (lambda: jaxunilat.Ball.table1(9), "example"),
+    ],
+)
+def test_bad_model_inputs_raise_value_error(make, name):
+    with pytest.raises(ValueError, match=name):
+        make()
+
+
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [
+        (dict(solver="rk4", dt=0.0), "dt"),
+        (dict(solver="rk4", dt=-1e-5), "dt"),
+        (dict(solver="rk4"), "dt"),
+        (dict(t_span=(1.0, 1.0)), "t1"),
+        (dict(t_span=(1.0, 0.5)), "t1"),
+        (dict(t_span=-1.0), "t1"),
+        (dict(solver="euler"), "solver"),
+        (dict(outputs=("x", "acceleration")), "output"),
+        (dict(y0=(0.0, 1.0, 2.0)), "y0"),
+        (dict(y0=((0.0, 1.0),)), "y0"),
+        (dict(y0=(float("nan"), 1.0)), "y0"),
+        (dict(rtol=0.0), "rtol"),
+    ],
+)
+def test_bad_simulate_inputs_raise_value_error(kwargs, name):
+    args = dict(y0=PAPER_Y0, t_span=1.0)
+    args.update(kwargs)
+    y0, t_span = args.pop("y0"), args.pop("t_span")
+    with pytest.raises(ValueError, match=name):
+        jaxunilat.simulate(jaxunilat.Ball.table1(2), y0, t_span, **args)
+
+
+def test_import_enables_float64():
+    env = {k: v for k, v in os.environ.items() if k != "JAX_ENABLE_X64"}
+    code = (
+        "import jax, jax.numpy as jnp\n"
+        "assert jnp.zeros(1).dtype == jnp.float32\n"
+        "import jaxunilat\n"
+        "print(jnp.zeros(1).dtype, jax.config.jax_enable_x64)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["float64", "True"]
+
+
+def test_nonzero_t0_is_a_time_shift(ref_ex2):
+    # The ball is autonomous: starting at t0 = 1 s gives the reference shifted by 1 s.
+    sol = tsit5(jaxunilat.Ball.table1(2), PAPER_Y0, (1.0, 3.0))
+    ts = np.asarray(sol.ts)
+    assert ts[0] == 1.0 and ts[-1] == 3.0
+    x_ref, _ = ref_ex2(ts - 1.0)
+    assert np.max(np.abs(arrays(sol, "x")[0] - x_ref)) <= 1e-5
