@@ -1,0 +1,254 @@
+"""The event mode (`solver="event"`): exact contact located and restarted in one loop.
+
+Every check here is against the independent references in `reference.py` (scipy DOP853
+with event location, or the drag-free piecewise closed form), never against the
+package's own output. All trajectory runs share one compiled configuration per model
+structure (same samples, outputs, max_steps, max_events) so that only values change.
+"""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import PAPER_Y0
+from reference import BallParams, closed_form_reference, parabola, scipy_reference
+
+import jaxunilat
+
+SAMPLES = 2001
+OUTPUTS = ("x", "v")
+MAX_STEPS = 8192
+MAX_EVENTS = 256
+ENTRY, EXIT, EXTREMUM = 1, 2, 3
+WALL_INDEX = {"lower": 0, "upper": 1}
+#: SPEC: the first five impact (contact onset) times of example 2 after t = 0, and x(2), v(2).
+SPEC_IMPACTS = np.array([0.121668, 0.263023, 0.442707, 0.645994, 0.943403])
+SPEC_X2, SPEC_V2 = -0.31366094434574779, 2.7757569948282916
+
+
+def event(model, y0, t1, tol, **kw):
+    """Event mode with the shared outputs, sample count and buffers (one compile per structure)."""
+    kw = {"samples": SAMPLES, "outputs": OUTPUTS, "max_steps": MAX_STEPS, "max_events": MAX_EVENTS, **kw}
+    return jaxunilat.simulate(model, jnp.asarray(y0, float), t1, solver="event", rtol=tol, atol=tol, **kw)
+
+
+def valid_events(sol):
+    ev = sol.events
+    n = int(ev.count)
+    return (np.asarray(ev.t[:n]), np.asarray(ev.kind[:n]), np.asarray(ev.wall[:n]), np.asarray(ev.y[:n]))
+
+
+def max_dx(sol, ref):
+    x_ref, _ = ref(np.asarray(sol.ts))
+    return float(np.max(np.abs(np.asarray(sol.ys["x"]) - x_ref)))
+
+
+@pytest.fixture(scope="module")
+def ev_ex2():
+    """Event mode, rtol = atol = 1e-10, example 2 on [0, 2] s."""
+    return event(jaxunilat.Ball.table1(2), PAPER_Y0, 2.0, 1e-10)
+
+
+# -- 1. accuracy ------------------------------------------------------------------------------
+
+
+def test_accuracy_example2_vs_scipy(ev_ex2, ref_ex2):
+    assert int(ev_ex2.status) == jaxunilat.Status.SUCCESS
+    err = max_dx(ev_ex2, ref_ex2)
+    print(f"event mode 1e-10 vs scipy, example 2: max |dx| = {err:.3e} m")
+    assert err <= 1e-8
+    # SPEC end state.
+    x1, v1 = np.asarray(ev_ex2.y1)
+    assert abs(x1 - SPEC_X2) <= 1e-8
+    assert abs(v1 - SPEC_V2) <= 1e-6
+    assert abs(float(ev_ex2.ys["x"][-1]) - SPEC_X2) <= 1e-8
+
+
+def test_accuracy_drag_free_vs_closed_form():
+    y0 = PAPER_Y0
+    ref = closed_form_reference(BallParams.table1(2, drag=None), y0, 2.0)
+    sol = event(jaxunilat.Ball.table1(2, drag=None), y0, 2.0, 1e-10)
+    assert int(sol.status) == jaxunilat.Status.SUCCESS
+    err = max_dx(sol, ref)
+    print(f"event mode 1e-10 vs closed form, drag-free: max |dx| = {err:.3e} m")
+    assert err <= 1e-8
+
+
+# -- 2. impact and exit times -------------------------------------------------------------------
+
+
+def test_entry_and_exit_times_vs_scipy(ev_ex2, ref_ex2):
+    t, kind, wall, _ = valid_events(ev_ex2)
+    assert np.all(np.diff(t) >= 0)
+    assert np.all(np.isin(kind, (ENTRY, EXIT, EXTREMUM)))
+    assert np.all(np.isinf(np.asarray(ev_ex2.events.t[int(ev_ex2.events.count) :])))
+    # The run starts inside the lower contact (x0 at the wall, v0 < 0): no entry at t = 0.
+    ref_in = [(c.t_in, WALL_INDEX[c.wall]) for c in ref_ex2.contacts if c.t_in > 0]
+    ref_out = [(c.t_out, WALL_INDEX[c.wall]) for c in ref_ex2.contacts if not math.isnan(c.t_out)]
+    ent, ext = kind == ENTRY, kind == EXIT
+    assert ent.sum() == len(ref_in) and ext.sum() == len(ref_out)
+    d_in = np.max(np.abs(t[ent] - [r[0] for r in ref_in]))
+    d_out = np.max(np.abs(t[ext] - [r[0] for r in ref_out]))
+    print(f"entry times: max |dt| = {d_in:.3e} s; exit times: max |dt| = {d_out:.3e} s")
+    assert d_in <= 1e-9 and d_out <= 1e-9
+    np.testing.assert_array_equal(wall[ent], [r[1] for r in ref_in])
+    np.testing.assert_array_equal(wall[ext], [r[1] for r in ref_out])
+    # SPEC: the first five impacts (given to 6 decimals).
+    np.testing.assert_allclose(t[ent][:5], SPEC_IMPACTS, rtol=0, atol=6e-7)
+    # Extrema: deepest points carry the contact's wall index, apexes −1.
+    assert np.all(wall[kind == EXTREMUM] >= -1)
+
+
+# -- 3. convergence -----------------------------------------------------------------------------
+
+
+def test_error_tracks_tolerance(ref_ex2):
+    tols = (1e-6, 1e-7, 1e-8, 1e-9)
+    errs = []
+    for tol in tols:
+        sol = event(jaxunilat.Ball.table1(2), PAPER_Y0, 2.0, tol)
+        assert int(sol.status) == jaxunilat.Status.SUCCESS
+        errs.append(max_dx(sol, ref_ex2))
+    print("tolerance study: " + ", ".join(f"{tol:.0e}: {e:.3e}" for tol, e in zip(tols, errs, strict=True)))
+    assert all(b < a for a, b in zip(errs[:-1], errs[1:], strict=True))
+    assert errs[-1] / errs[0] <= 1e-2
+
+
+# -- 4. gradients -------------------------------------------------------------------------------
+
+GRAD_TS = np.linspace(0.0, 0.5, 51)
+#: kappa, k_r, x0, v0. x0 is 1 cm above the lower wall: the flow is not differentiable
+#: in x0 at x0 = wall itself (the damping force jumps there, so the one-sided
+#: derivatives differ by the saltation term), hence a start in free flight.
+THETA0 = np.array([1.0e4, 0.2, -0.39, PAPER_Y0[1]])
+
+
+def _losses_jax(theta):
+    kappa, k_r, x0, v0 = theta
+    sol = jaxunilat.simulate(
+        jaxunilat.Ball.table1(2, kappa=kappa, k_r=k_r),
+        jnp.stack([x0, v0]),
+        0.5,
+        solver="event",
+        rtol=1e-12,
+        atol=1e-12,
+        ts=jnp.asarray(GRAD_TS),
+        outputs=("x",),
+        max_steps=4096,
+        max_events=64,
+    )
+    ev = sol.events
+    is_entry = (ev.kind == ENTRY) & (jnp.arange(ev.t.shape[0]) < ev.count)
+    idx = jnp.nonzero(is_entry, size=3, fill_value=0)[0]
+    return jnp.stack([jnp.sum(sol.ys["x"]), jnp.sum(ev.t[idx])])
+
+
+def _losses_ref(theta):
+    kappa, k_r, x0, v0 = (float(v) for v in theta)
+    ref = scipy_reference(BallParams.table1(2, kappa=kappa, k_r=k_r), (x0, v0), 0.5)
+    x, _ = ref(GRAD_TS)
+    entries = [c.t_in for c in ref.contacts if c.t_in > 0][:3]
+    assert len(entries) == 3
+    return np.array([np.sum(x), np.sum(entries)])
+
+
+def _fd(theta, i, h):
+    tp, tm = theta.copy(), theta.copy()
+    tp[i] += h
+    tm[i] -= h
+    return (_losses_ref(tp) - _losses_ref(tm)) / (2 * h)
+
+
+@pytest.mark.slow
+def test_gradients_vs_reference_finite_differences():
+    jac = np.asarray(jax.jit(jax.jacrev(_losses_jax))(jnp.asarray(THETA0)))  # (2 losses, 4 params)
+    names = ("kappa", "k_r", "x0", "v0")
+    for i, name in enumerate(names):
+        # Relative steps 1e-6 and (for the contact parameters) 1e-5: the FD itself has
+        # converged when the two agree well below the test bound.
+        fd = _fd(THETA0, i, 1e-6 * abs(THETA0[i]))
+        if name in ("kappa", "k_r"):
+            fd_coarse = _fd(THETA0, i, 1e-5 * abs(THETA0[i]))
+            np.testing.assert_allclose(fd_coarse, fd, rtol=5e-6, err_msg=f"FD not converged for {name}")
+        rel = np.abs(jac[:, i] - fd) / np.abs(fd)
+        print(f"d/d{name}: AD {jac[:, i]}, FD {fd}, rel {rel}")
+        assert np.all(rel <= 1e-5), f"d/d{name}: AD {jac[:, i]} vs FD {fd} (rel {rel})"
+
+
+# -- 5. vmap ------------------------------------------------------------------------------------
+
+
+def test_vmap_equals_separate_runs():
+    kappas = np.array([5e3, 1e4, 1.5e4, 2e4])
+    k_rs = np.array([0.1, 0.2, 0.3, 0.15])
+
+    def run(kappa, k_r, max_steps=MAX_STEPS):
+        ball = jaxunilat.Ball.table1(2, kappa=kappa, k_r=k_r)
+        return event(ball, PAPER_Y0, 0.5, 1e-10, max_steps=max_steps)
+
+    # A smaller step buffer for the batch (vmapped buffer writes cost O(max_steps) each);
+    # the buffer size does not change the arithmetic, and the separate runs reuse the
+    # shared compiled configuration.
+    batch = jax.vmap(lambda a, b: run(a, b, max_steps=1024))(jnp.asarray(kappas), jnp.asarray(k_rs))
+    assert batch.ys["x"].shape == (4, SAMPLES)
+    for i in range(4):
+        one = run(kappas[i], k_rs[i])
+        assert int(one.status) == int(batch.status[i]) == jaxunilat.Status.SUCCESS
+        assert int(one.events.count) == int(batch.events.count[i])
+        dx = np.max(np.abs(np.asarray(one.ys["x"]) - np.asarray(batch.ys["x"][i])))
+        assert dx <= 1e-9, f"set {i}: max |dx| = {dx:.3e} m"
+
+
+# -- 6. no retrace ------------------------------------------------------------------------------
+
+
+def test_no_retrace_when_only_values_change(ev_ex2):
+    del ev_ex2  # compiled the shared configuration
+    before = jaxunilat.trace_counts()["simulate"]
+    event(jaxunilat.Ball.table1(2, kappa=2e4, k_r=0.1), (-0.3, -2.0), 2.0, 1e-10)
+    event(jaxunilat.Ball.table1(4), PAPER_Y0, 2.0, 1e-10)
+    event(jaxunilat.Ball.table1(2, kappa=7e3, k_r=0.35), (0.0, 1.0), 2.0, 1e-10)
+    assert jaxunilat.trace_counts()["simulate"] == before
+
+
+# -- 7. rest ------------------------------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_comes_to_rest_on_lower_wall():
+    ball = jaxunilat.Ball.table1(2)
+    sol = event(ball, PAPER_Y0, 20.0, 1e-8, max_steps=50_000, max_events=4096, throw=False)
+    assert int(sol.status) == jaxunilat.Status.SUCCESS
+    t, kind, wall, _ = valid_events(sol)
+    n_entries = int(np.sum(kind == ENTRY))
+    print(f"20 s: {int(sol.num_steps)} steps, {int(sol.events.count)} events, {n_entries} entries")
+    assert n_entries < 200
+    x1, v1 = np.asarray(sol.y1)
+    x_rest = -0.4 - 2.37e-3 * 9.81 / 1.0e4
+    print(f"x(20) - x_rest = {x1 - x_rest:.3e} m, v(20) = {v1:.3e} m/s")
+    assert abs(x1 - x_rest) <= 1e-7
+    assert abs(v1) < 1e-6
+
+
+# -- 8. grazing ---------------------------------------------------------------------------------
+
+
+def test_grazing_apex_at_upper_wall():
+    g, lo, hi = 9.81, -0.4, 0.4
+    v0 = math.sqrt(2 * g * (hi - lo))
+    flight = 2 * v0 / g
+    sol = event(jaxunilat.Ball.table1(2, drag=None), (lo, v0), 2.0, 1e-10)
+    assert int(sol.status) == jaxunilat.Status.SUCCESS
+    ts = np.asarray(sol.ts)
+    sel = ts < flight - 1e-6
+    x_ref, _ = parabola(lo, v0, g, ts[sel])
+    err = np.max(np.abs(np.asarray(sol.ys["x"])[sel] - x_ref))
+    print(f"grazing: max |dx| over the flight = {err:.3e} m")
+    assert err <= 1e-7
+    # The next contact is with the lower wall at the end of the flight (a touch of the
+    # upper wall, if recorded, lasts no time).
+    t, kind, wall, _ = valid_events(sol)
+    lower_entries = t[(kind == ENTRY) & (wall == 0)]
+    assert len(lower_entries) and abs(lower_entries[0] - flight) <= 1e-9
