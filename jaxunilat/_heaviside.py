@@ -63,7 +63,23 @@ class Exact(AbstractHeaviside):
         return False
 
 
-class Logistic(AbstractHeaviside):
+class AbstractSmoothHeaviside(AbstractHeaviside):
+    """A smooth option of width ε > 0 (in the units of `z`), with H(z) ≈ σ(z/ε)."""
+
+    eps: Array = eqx.field(converter=jnp.asarray)
+
+    def __check_init__(self):
+        check_range("eps", self.eps, lo=0.0, lo_open=True, unit="m")
+
+    def step(self, z):
+        return jax.nn.sigmoid(z / self.eps)
+
+    @property
+    def smooth(self):
+        return True
+
+
+class Logistic(AbstractSmoothHeaviside):
     """Logistic smoothing, H(z) ≈ σ(z/ε), with z·H(z) ≈ z·σ(z/ε).
 
     **Arguments:**
@@ -74,23 +90,11 @@ class Logistic(AbstractHeaviside):
     contact force is weakly attractive within a few ε outside the wall.
     """
 
-    eps: Array = eqx.field(converter=jnp.asarray)
-
-    def __check_init__(self):
-        check_range("eps", self.eps, lo=0.0, lo_open=True, unit="m")
-
-    def step(self, z):
-        return jax.nn.sigmoid(z / self.eps)
-
     def ramp(self, z):
         return z * jax.nn.sigmoid(z / self.eps)
 
-    @property
-    def smooth(self):
-        return True
 
-
-class Softplus(AbstractHeaviside):
+class Softplus(AbstractSmoothHeaviside):
     """Softplus ramp, z·H(z) ≈ ε·softplus(z/ε), with H(z) ≈ σ(z/ε) its derivative.
 
     **Arguments:**
@@ -101,20 +105,8 @@ class Softplus(AbstractHeaviside):
     about ε·ln 2 less deep than with the exact step.
     """
 
-    eps: Array = eqx.field(converter=jnp.asarray)
-
-    def __check_init__(self):
-        check_range("eps", self.eps, lo=0.0, lo_open=True, unit="m")
-
-    def step(self, z):
-        return jax.nn.sigmoid(z / self.eps)
-
     def ramp(self, z):
         return self.eps * jax.nn.softplus(z / self.eps)
-
-    @property
-    def smooth(self):
-        return True
 
 
 def heaviside(name: str, eps: ArrayLike | None = None) -> AbstractHeaviside:
