@@ -33,6 +33,7 @@ from ._contact import (  # noqa: E402
     restitution as restitution,
     symmetric_clearance_force as symmetric_clearance_force,
 )
+from ._event import EventRecord as EventRecord  # noqa: E402
 from ._heaviside import (  # noqa: E402
     AbstractHeaviside as AbstractHeaviside,
     Exact as Exact,
@@ -42,6 +43,12 @@ from ._heaviside import (  # noqa: E402
 )
 from ._io import read_csv as read_csv, write_csv as write_csv  # noqa: E402
 from ._model import AbstractModel as AbstractModel  # noqa: E402
+from ._observe import (  # noqa: E402
+    CONTACT_COLUMNS as CONTACT_COLUMNS,
+    apexes as apexes,
+    contact_table as contact_table,
+    impact_times as impact_times,
+)
 from ._plot import plot_ball as plot_ball, save_figure as save_figure  # noqa: E402
 from ._simulate import (  # noqa: E402
     Solution as Solution,

@@ -162,6 +162,11 @@ class Ball(AbstractModel):
         return int(self.lower is not None) + int(self.upper is not None)
 
     @property
+    def wall_names(self) -> tuple[str, ...]:
+        """Names of the present walls, in switch order (static)."""
+        return tuple(n for n, w in (("lower", self.lower), ("upper", self.upper)) if w is not None)
+
+    @property
     def contact_mass(self) -> Array:
         """The mass that turns accelerations into contact forces, kg."""
         return self.mass

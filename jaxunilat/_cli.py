@@ -1,6 +1,7 @@
 """The `jaxunilat` command line.
 
     jaxunilat simulate ball [--example N] [--kappa K] ... [--out FILE.csv] [--plot FILE.png]
+                            [--solver event --events FILE.csv]
 
 Exit codes: 0 success, 1 a run-time failure (the solver diverged or ran out of steps,
 a file could not be written), 2 bad user input. Every error is one line on stderr,
@@ -60,6 +61,7 @@ def _one_line(text: str) -> str:
 
 def _add_simulate_ball(models) -> None:
     from ._ball import PAPER_DRAG, PAPER_GAP
+    from ._observe import CONTACT_COLUMNS
     from ._solvers import SOLVERS
 
     p = models.add_parser(
@@ -105,6 +107,14 @@ def _add_simulate_ball(models) -> None:
     )
     out.add_argument("--out", metavar="FILE.csv", help="write the samples as CSV with header t,x,v")
     out.add_argument("--plot", metavar="FILE.png", help="draw x(t), v(t) and the phase diagram v(x)")
+    out.add_argument(
+        "--events",
+        metavar="FILE.csv",
+        help="write the located contacts as CSV, one row per contact, with header "
+        + ",".join(CONTACT_COLUMNS)
+        + " (s, m/s, N, m; empty t_out, v_out, restitution for a contact still open at t1); "
+        "needs --solver event",
+    )
     p.set_defaults(func=_run_simulate_ball)
 
 
@@ -137,15 +147,16 @@ def _check_outputs(args) -> None:
 
     from ._io import check_output_path
 
-    for path in (args.out, args.plot):
-        if path is not None:
-            check_output_path(path)
-    if (
-        args.out is not None
-        and args.plot is not None
-        and os.path.abspath(args.out) == os.path.abspath(args.plot)
-    ):
-        raise ValueError(f"--out and --plot name the same file {args.out!r}")
+    if args.events is not None and args.solver != "event":
+        raise UsageError(f"--events needs --solver event (got --solver {args.solver})")
+    flags = (("--out", args.out), ("--plot", args.plot), ("--events", args.events))
+    named = [(flag, path) for flag, path in flags if path is not None]
+    for _, path in named:
+        check_output_path(path)
+    for i, (flag_a, path_a) in enumerate(named):
+        for flag_b, path_b in named[i + 1 :]:
+            if os.path.abspath(path_a) == os.path.abspath(path_b):
+                raise ValueError(f"{flag_a} and {flag_b} name the same file {path_a!r}")
     if args.plot is not None:
         suffix = os.path.splitext(args.plot)[1].lstrip(".").lower()
         if suffix and suffix not in FigureCanvasAgg.get_supported_filetypes():
@@ -286,6 +297,14 @@ def _run_simulate_ball(args) -> int:
             fig = plot_ball(ts, x, v, walls=(float(ball.lower), float(ball.upper)), title=title)
             save_figure(fig, args.plot)
             lines.append(("wrote", f"{args.plot} (x(t), v(t), v(x))"))
+        if args.events is not None:
+            from ._io import write_csv
+            from ._observe import CONTACT_COLUMNS, contact_table
+
+            table = contact_table(sol, ball)
+            columns = [table[name] for name in CONTACT_COLUMNS]
+            write_csv(args.events, CONTACT_COLUMNS, columns, nan="")
+            lines.append(("wrote", f"{args.events} (contact table: {len(table['t_in'])} contacts)"))
     except OSError as err:
         raise RunError(f"cannot write output: {err}") from None
     for key, value in lines:

@@ -1,12 +1,15 @@
 """The event mode: exact contact, located and restarted inside one compiled loop.
 
 The exact model is smooth inside each region (free flight, contact with a wall), so
-the loop integrates the region's own smooth right-hand side with Tsit5 and stops at
-every region boundary:
+the loop integrates the region's own smooth right-hand side with an explicit
+Runge–Kutta pair (Tsit5, or Dopri8 for tight tolerances) and stops at every region
+boundary:
 
-1. One loop over steps (`equinox.internal.while_loop`, checkpointed, so it supports
-   `jax.jit`, `jax.vmap` and reverse-mode `jax.grad`). diffrax's `Tsit5` takes each
-   step; step-size control is an integral controller on its error estimate.
+1. One loop over steps (`equinox.internal.while_loop`, checkpointed with every step
+   a checkpoint, so it supports `jax.jit`, `jax.vmap` and reverse-mode `jax.grad`).
+   Each step uses diffrax's Butcher tableau with the stages unrolled, and diffrax's
+   dense interpolant; step-size control is an integral controller on the embedded
+   error estimate.
 2. After each accepted step the switching functions g_i (signed distances into the
    walls) are checked on a sub-grid of the step's dense interpolant, and at the roots
    of the model's observable (v for the ball: apexes and deepest points). Checking at
@@ -36,6 +39,8 @@ from jaxtyping import Array
 ENTRY, EXIT, EXTREMUM = 1, 2, 3
 
 _ITERATIONS = 12
+_REC = 3  # leading columns of a step record: t0, t1, t_end
+_EV = 4  # leading columns of an event record: t, kind, wall, peak force
 _LOOP_KIND = "checkpointed"
 
 
@@ -65,8 +70,35 @@ class EventRecord(eqx.Module):
     open_peak_force: Array
 
 
-def _interp(t0, t1, dense):
-    return dfx.Tsit5().interpolation_cls(t0=t0, t1=t1, **dense)
+#: The Runge–Kutta pairs the event mode can integrate its smooth pieces with:
+#: diffrax solver class and the exponent of its step-size controller (1/(q+1),
+#: q the order of the embedded error estimate).
+PIECE_SOLVERS = {"tsit5": (dfx.Tsit5, 1 / 5), "dopri8": (dfx.Dopri8, 1 / 8)}
+
+
+def _erk_step(solver_cls, f, t, h, y, f0):
+    """One step of an FSAL explicit RK pair from diffrax's Butcher tableau, unrolled.
+
+    `f0` = f(t, y) (first same as last). Returns (y1, y_error, k, f1) where k holds
+    the stage increments hᵢ·fᵢ that the solver's diffrax interpolant expects, and
+    f1 = f(t + h, y1) is the next step's f0. Unrolling the stages lets XLA fuse the
+    step into a few kernels; diffrax's generic step loops over its stages.
+    """
+    tab = solver_cls.tableau
+    ks = [h * f0]
+    f_last = f0
+    for c_i, a_i in zip(tab.c, tab.a_lower, strict=True):
+        y_i = y + sum(float(a) * k for a, k in zip(a_i, ks, strict=True) if a != 0)
+        f_last = f(t + float(c_i) * h, y_i)
+        ks.append(h * f_last)
+    y1 = y + sum(float(b) * k for b, k in zip(tab.b_sol, ks, strict=True) if b != 0)
+    y_err = sum(float(b) * k for b, k in zip(tab.b_error, ks, strict=True) if b != 0)
+    # FSAL: the last stage is evaluated at (t + h, y1).
+    return y1, y_err, jnp.stack(ks), f_last
+
+
+def _interp(solver_cls, t0, t1, dense):
+    return solver_cls.interpolation_cls(t0=t0, t1=t1, **dense)
 
 
 def _locate(f, a, b):
@@ -100,10 +132,8 @@ def _locate(f, a, b):
 
 def event_solve(model, y0, t0, t1, ts, settings, outputs):
     """Integrate `model` in event mode. Returns (ys, y1, status, stats, events)."""
-    # The stage loop unrolled into a bounded scan, as diffeqsolve's own
-    # RecursiveCheckpointAdjoint does: reverse-mode differentiable and cheap to compile.
-    solver = dfx.Tsit5(scan_kind="bounded")
-    term = dfx.ODETerm(lambda t, y, args: args[0].region_vector_field(t, y, args[1]))
+    solver_cls, exponent = PIECE_SOLVERS[settings.piece_solver]
+    stages = len(solver_cls.tableau.c) + 1
     n = y0.shape[0]
     n_sw = model.num_switches
     max_steps = settings.max_steps
@@ -124,31 +154,38 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         a_free = model.region_vector_field(t0, y, jnp.zeros_like(mask))[1:]
         return jnp.max(jnp.abs(a - a_free)) * model.contact_mass
 
+    start_in_contact = jnp.any(mask0)
+    first_event = jnp.concatenate(
+        [
+            jnp.stack(
+                [t0, jnp.asarray(ENTRY, dtype), jnp.argmax(mask0).astype(dtype), jnp.asarray(0.0, dtype)]
+            ),
+            y0,
+        ]
+    )
     init = dict(
         t=t0,
         y=y0,
         mask=mask0,
         dt=jnp.asarray(dt0, dtype),
-        fsal=solver.init(term, t0, t0 + dt0, y0, (model, mask0)),
-        jump=jnp.array(True),
+        f0=model.region_vector_field(t0, y0, mask0),
         seen_extremum=jnp.array(False),
         peak=jnp.where(jnp.any(mask0), contact_force_abs(y0, mask0), 0.0),
         n_steps=jnp.array(0),
         n_accepted=jnp.array(0),
         n_rejected=jnp.array(0),
-        n_events=jnp.array(0),
+        n_events=jnp.where(start_in_contact, 1, 0),
         overflow=jnp.array(False),
         nonfinite=jnp.array(False),
-        rec_t0=jnp.zeros(max_steps, dtype),
-        rec_t1=jnp.ones(max_steps, dtype),
-        rec_end=jnp.full(max_steps, jnp.inf, dtype),
-        rec_y0=jnp.zeros((max_steps, n), dtype),
-        rec_k=jnp.zeros((max_steps, 7, n), dtype),
-        ev_t=jnp.full(max_events, jnp.inf, dtype),
-        ev_y=jnp.zeros((max_events, n), dtype),
-        ev_kind=jnp.zeros(max_events, jnp.int32),
-        ev_wall=jnp.zeros(max_events, jnp.int32),
-        ev_peak=jnp.zeros(max_events, dtype),
+        # One row per accepted step: [t0, t1, t_end, y0 (n), k (7n)]; t_end = +inf unused.
+        rec=jnp.zeros((max_steps, _REC + (stages + 1) * n), dtype).at[:, 2].set(jnp.inf),
+        # One row per event: [t, kind, wall, peak force, y (n)]; a contact open at t0
+        # is recorded as an entry at t0.
+        ev=jnp.where(
+            (jnp.arange(max_events)[:, None] == 0) & start_in_contact,
+            first_event,
+            jnp.zeros((max_events, _EV + n), dtype).at[:, 0].set(jnp.inf),
+        ),
     )
 
     def cond(c):
@@ -158,11 +195,10 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         i = c["n_events"]
         ok = pred & (i < max_events)
         c = dict(c)
-        c["ev_t"] = eqxi.buffer_at_set(c["ev_t"], i, t, pred=ok)
-        c["ev_y"] = eqxi.buffer_at_set(c["ev_y"], i, y, pred=ok)
-        c["ev_kind"] = eqxi.buffer_at_set(c["ev_kind"], i, jnp.int32(kind), pred=ok)
-        c["ev_wall"] = eqxi.buffer_at_set(c["ev_wall"], i, jnp.asarray(wall, jnp.int32), pred=ok)
-        c["ev_peak"] = eqxi.buffer_at_set(c["ev_peak"], i, peak, pred=ok)
+        row = jnp.concatenate(
+            [jnp.stack([t, jnp.asarray(kind, dtype), jnp.asarray(wall, dtype), jnp.asarray(peak, dtype)]), y]
+        )
+        c["ev"] = eqxi.buffer_at_set(c["ev"], i, row, pred=ok)
         c["n_events"] = i + jnp.where(ok, 1, 0)
         c["overflow"] = c["overflow"] | (pred & (i >= max_events))
         return c
@@ -172,61 +208,93 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         h = jnp.minimum(jnp.minimum(c["dt"], dtmax), t1 - t)
         t_next = jnp.where(t1 - (t + h) < 1e-12 * jnp.abs(t1), t1, t + h)
         h = t_next - t
-        y1, y_err, dense, fsal, _ = solver.step(term, t, t_next, y, (model, mask), c["fsal"], c["jump"])
+        y1, y_err, k, f1 = _erk_step(
+            solver_cls, lambda s, z: model.region_vector_field(s, z, mask), t, h, y, c["f0"]
+        )
+        dense = dict(y0=y, y1=y1, k=k)
         scale = settings.atol + settings.rtol * jnp.maximum(jnp.abs(y), jnp.abs(y1))
         err = jnp.sqrt(jnp.mean((y_err / scale) ** 2))
         finite = jnp.all(jnp.isfinite(y1)) & jnp.isfinite(err)
         accept = (err <= 1.0) & finite
-        factor = jnp.clip(0.9 * jnp.where(err > 0, err, 1e-10) ** (-0.2), 0.2, 10.0)
+        factor = jnp.clip(0.9 * jnp.where(err > 0, err, 1e-10) ** (-exponent), 0.2, 10.0)
         factor = jnp.where(finite, factor, 0.2)
         dt_new = jax.lax.stop_gradient(h * factor)
 
-        interp = _interp(t, t_next, dense)
+        interp = _interp(solver_cls, t, t_next, dense)
         sub_t = t + fractions * h
         sub_y = jax.vmap(interp.evaluate)(sub_t)
-
-        # Extremum of the observable (an apex, or the deepest point) inside the step.
-        obs0 = model.observable(y)
+        # Cheap tests on the sub-grid: a sign change of the observable (an extremum
+        # inside the step) or a switching function on the wrong side (a crossing).
         obs_sub = jax.vmap(model.observable)(sub_y)
-        prev = jnp.concatenate([obs0[None], obs_sub[:-1]])
+        prev = jnp.concatenate([model.observable(y)[None], obs_sub[:-1]])
         flips = (jnp.sign(prev) != jnp.sign(obs_sub)) & (obs_sub != 0)
         has_ext = jnp.any(flips)
-        j = jnp.argmax(flips)
-        lo = jnp.where(j == 0, t, sub_t[jnp.maximum(j - 1, 0)])
-        hi = sub_t[j]
-        t_ext = jax.lax.cond(
-            has_ext,
-            lambda: _locate(lambda s: model.observable(interp.evaluate(s)), lo, hi),
-            lambda: t_next,
-        )
-        y_ext = interp.evaluate(t_ext)
+        g_sub = jax.vmap(model.switches)(sub_y)
+        wrong_sub = jnp.where(mask, g_sub < 0, g_sub > 0)
+        in_contact = jnp.any(mask)
+        eventful = accept & (has_ext | jnp.any(wrong_sub))
 
-        # Switching functions on the sub-grid and at the extremum, in time order.
-        check_t = jnp.concatenate([sub_t, t_ext[None]])
-        check_y = jnp.concatenate([sub_y, y_ext[None]])
-        order = jnp.argsort(check_t)
-        check_t, check_y = check_t[order], check_y[order]
-        g_check = jax.vmap(model.switches)(check_y)  # (points, n_sw)
-        wrong = jnp.where(mask, g_check < 0, g_check > 0)  # left the region
-        first_pt = jnp.where(jnp.any(wrong, axis=0), jnp.argmax(wrong, axis=0), check_t.shape[0])
-        crossing = jnp.any(wrong)
+        def plain():
+            no = jnp.array(False)
+            return dict(
+                t_end=t_next,
+                y_end=y1,
+                mask=mask,
+                f0=f1,
+                ext=(no, t_next, y1),
+                cross=(no, t_next, y1, no, jnp.array(0)),
+            )
 
-        def root_of(i):
-            p = first_pt[i]
-            pc = jnp.minimum(p, check_t.shape[0] - 1)
-            a = jnp.where(p == 0, t, check_t[jnp.maximum(pc - 1, 0)])
-            return _locate(lambda s: model.switches(interp.evaluate(s))[i], a, check_t[pc])
+        def eventful_step():
+            # Locate the observable's extremum, then check the switches there too:
+            # it is where a short excursion beyond a wall is deepest.
+            j = jnp.argmax(flips)
+            lo = jnp.where(j == 0, t, sub_t[jnp.maximum(j - 1, 0)])
+            t_ext = jax.lax.cond(
+                has_ext,
+                lambda: _locate(lambda s: model.observable(interp.evaluate(s)), lo, sub_t[j]),
+                lambda: t_next,
+            )
+            y_ext = interp.evaluate(t_ext)
+            check_t = jnp.concatenate([sub_t, t_ext[None]])
+            check_y = jnp.concatenate([sub_y, y_ext[None]])
+            order = jnp.argsort(check_t)
+            check_t, check_y = check_t[order], check_y[order]
+            g_check = jax.vmap(model.switches)(check_y)  # (points, n_sw)
+            wrong = jnp.where(mask, g_check < 0, g_check > 0)
+            n_pts = check_t.shape[0]
+            first_pt = jnp.where(jnp.any(wrong, axis=0), jnp.argmax(wrong, axis=0), n_pts)
+            crossing = jnp.any(wrong)
 
-        roots = jax.lax.cond(
-            crossing,
-            lambda: jax.vmap(root_of)(jnp.arange(n_sw)),
-            lambda: jnp.full(n_sw, jnp.inf, dtype),
-        )
-        roots = jnp.where(first_pt < check_t.shape[0], roots, jnp.inf)
-        wall = jnp.argmin(roots)
-        t_star = jnp.where(crossing, roots[wall], t_next)
-        y_star = jnp.where(crossing, interp.evaluate(t_star), y1)
-        t_end = jnp.where(crossing, t_star, t_next)
+            def root_of(i):
+                pc = jnp.minimum(first_pt[i], n_pts - 1)
+                a = jnp.where(first_pt[i] == 0, t, check_t[jnp.maximum(pc - 1, 0)])
+                return _locate(lambda s: model.switches(interp.evaluate(s))[i], a, check_t[pc])
+
+            roots = jax.lax.cond(
+                crossing,
+                lambda: jax.vmap(root_of)(jnp.arange(n_sw)),
+                lambda: jnp.full(n_sw, jnp.inf, dtype),
+            )
+            roots = jnp.where(first_pt < n_pts, roots, jnp.inf)
+            wall = jnp.argmin(roots)
+            t_star = jnp.where(crossing, roots[wall], t_next)
+            y_star = jnp.where(crossing, interp.evaluate(t_star), y1)
+            entering = ~mask[wall]
+            new_mask = jnp.where(crossing, mask.at[wall].set(entering), mask)
+            # The region changed: restart FSAL with the new right-hand side.
+            f_star = model.region_vector_field(t_star, y_star, new_mask)
+            return dict(
+                t_end=t_star,
+                y_end=y_star,
+                mask=new_mask,
+                f0=jnp.where(crossing, f_star, f1),
+                ext=(has_ext & (t_ext < t_star), t_ext, y_ext),
+                cross=(crossing, t_star, y_star, entering, wall),
+            )
+
+        out = jax.lax.cond(eventful, eventful_step, plain)
+        t_end = out["t_end"]
 
         c = dict(c)
         c["n_steps"] = c["n_steps"] + 1
@@ -235,78 +303,65 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         c["nonfinite"] = ~finite & (h <= 1e-14 * jnp.maximum(jnp.abs(t), 1.0))
 
         # Record the accepted step's interpolant, valid on [t, t_end].
-        i = c["n_accepted"] - 1
-        c["rec_t0"] = eqxi.buffer_at_set(c["rec_t0"], i, t, pred=accept)
-        c["rec_t1"] = eqxi.buffer_at_set(c["rec_t1"], i, t_next, pred=accept)
-        c["rec_end"] = eqxi.buffer_at_set(c["rec_end"], i, t_end, pred=accept)
-        c["rec_y0"] = eqxi.buffer_at_set(c["rec_y0"], i, y, pred=accept)
-        c["rec_k"] = eqxi.buffer_at_set(c["rec_k"], i, dense["k"], pred=accept)
+        row = jnp.concatenate([jnp.stack([t, t_next, t_end]), y, k.reshape(-1)])
+        c["rec"] = eqxi.buffer_at_set(c["rec"], c["n_accepted"] - 1, row, pred=accept)
 
-        in_contact = jnp.any(mask)
-        ext_wall = jnp.where(in_contact, jnp.argmax(mask), -1)
         # An apex in every flight; the first deepest point in each contact.
-        rec_ext = accept & has_ext & (t_ext < t_end) & ~(in_contact & c["seen_extremum"])
+        ext_pred, t_ext, y_ext = out["ext"]
+        rec_ext = accept & ext_pred & ~(in_contact & c["seen_extremum"])
+        ext_wall = jnp.where(in_contact, jnp.argmax(mask), -1)
         c = record_event(c, rec_ext, t_ext, y_ext, EXTREMUM, ext_wall, 0.0)
         seen = c["seen_extremum"] | (rec_ext & in_contact)
 
         # Peak contact force on the sub-grid of this step (up to t_end).
-        valid = sub_t <= t_end
         f_sub = jax.vmap(lambda yy: contact_force_abs(yy, mask))(sub_y)
-        peak = jnp.where(
-            accept & in_contact, jnp.maximum(c["peak"], jnp.max(jnp.where(valid, f_sub, 0.0))), c["peak"]
-        )
+        f_max = jnp.max(jnp.where(sub_t <= t_end, f_sub, 0.0))
+        peak = jnp.where(accept & in_contact, jnp.maximum(c["peak"], f_max), c["peak"])
 
-        event = accept & crossing
-        entering = ~mask[wall]
+        crossed, t_star, y_star, entering, wall = out["cross"]
+        event = accept & crossed
         c = record_event(c, event & ~entering, t_star, y_star, EXIT, wall, peak)
         c = record_event(c, event & entering, t_star, y_star, ENTRY, wall, 0.0)
-        new_mask = jnp.where(event, mask.at[wall].set(entering), mask)
-        f_new = contact_force_abs(y_star, new_mask)
+        f_new = contact_force_abs(y_star, out["mask"])
         c["peak"] = jnp.where(event, jnp.where(entering, f_new, 0.0), peak)
         c["seen_extremum"] = jnp.where(event, False, seen)
 
         c["t"] = jnp.where(accept, t_end, t)
-        c["y"] = jnp.where(accept, y_star, y)
-        c["mask"] = new_mask
-        c["fsal"] = jax.tree.map(lambda a, b: jnp.where(accept, a, b), fsal, c["fsal"])
-        c["jump"] = jnp.where(accept, event, c["jump"])
+        c["y"] = jnp.where(accept, out["y_end"], y)
+        c["mask"] = jnp.where(accept, out["mask"], mask)
+        c["f0"] = jnp.where(accept, out["f0"], c["f0"])
         c["dt"] = jnp.where(event, jnp.minimum(dt_new, jax.lax.stop_gradient(h)), dt_new)
         return c
 
-    buffers = lambda c: [  # noqa: E731
-        c[k]
-        for k in (
-            "rec_t0",
-            "rec_t1",
-            "rec_end",
-            "rec_y0",
-            "rec_k",
-            "ev_t",
-            "ev_y",
-            "ev_kind",
-            "ev_wall",
-            "ev_peak",
-        )
-    ]
-    final = eqxi.while_loop(cond, body, init, max_steps=max_steps, buffers=buffers, kind=_LOOP_KIND)
+    buffers = lambda c: [c["rec"], c["ev"]]  # noqa: E731
+    # The carry outside the buffers is a few dozen numbers, so every step can be a
+    # checkpoint: reverse mode then recomputes nothing.
+    final = eqxi.while_loop(
+        cond, body, init, max_steps=max_steps, buffers=buffers, kind=_LOOP_KIND, checkpoints=max_steps
+    )
 
     # Outputs at the save times from the recorded interpolants.
+    rec = final["rec"]
+
     def evaluate(s):
-        r = jnp.clip(jnp.searchsorted(final["rec_end"], s, side="left"), 0, max_steps - 1)
-        dense = dict(y0=final["rec_y0"][r], y1=final["rec_y0"][r], k=final["rec_k"][r])
-        y = _interp(final["rec_t0"][r], final["rec_t1"][r], dense).evaluate(s)
+        r = jnp.clip(jnp.searchsorted(rec[:, 2], s, side="left"), 0, max_steps - 1)
+        row = rec[r]
+        y_start = row[_REC : _REC + n]
+        dense = dict(y0=y_start, y1=y_start, k=row[_REC + n :].reshape(stages, n))
+        y = _interp(solver_cls, row[0], row[1], dense).evaluate(s)
         y = jnp.where(s == t0, y0, y)
         return {name: model.output(name, s, y) for name in outputs}
 
     ys = jax.vmap(evaluate)(ts)
     reached = ts <= final["t"]
     ys = {k: jnp.where(reached, v, jnp.nan) for k, v in ys.items()}
+    ev = final["ev"]
     events = EventRecord(
-        t=final["ev_t"],
-        y=final["ev_y"],
-        kind=final["ev_kind"],
-        wall=final["ev_wall"],
-        peak_force=final["ev_peak"],
+        t=ev[:, 0],
+        y=ev[:, _EV:],
+        kind=ev[:, 1].astype(jnp.int32),
+        wall=ev[:, 2].astype(jnp.int32),
+        peak_force=ev[:, 3],
         count=final["n_events"],
         open_peak_force=final["peak"],
     )

@@ -38,34 +38,59 @@ def write_csv(
     columns: Sequence,
     *,
     fmt: str = "%.17g",
+    nan: str | None = None,
     inputs: Iterable[str | os.PathLike] = (),
 ) -> None:
-    """Write columns of numbers as a CSV file with a one-line header.
+    """Write columns as a CSV file with a one-line header.
 
     **Arguments:**
 
     - `path`: the file to write (replaced if it exists, unless it is an input).
     - `header`: the column names, e.g. `("t", "x", "v")`; written as `t,x,v`.
     - `columns`: one 1-D array per name, all the same length (the values in their
-      own units: s, m, m/s, ...).
+      own units: s, m, m/s, ...). A column of strings (NumPy string or object
+      dtype, e.g. wall names) is written as text; its entries must not contain
+      commas or line breaks.
     - `fmt`: the number format; the default `%.17g` round-trips float64 exactly.
+    - `nan`: the text written for a NaN number, e.g. `""` for an empty field
+      (default: `fmt`'s own, `nan`).
     - `inputs`: files this run reads, never to be overwritten.
     """
     check_output_path(path, inputs=inputs)
     header = [str(h) for h in header]
     if len(header) != len(columns):
         raise ValueError(f"header has {len(header)} names but {len(columns)} columns were given")
-    if any("," in h for h in header):
-        raise ValueError(f"header = {header!r}: column names must not contain commas")
-    arrays = [np.asarray(c, dtype=float).ravel() for c in columns]
+    if any("," in h or "\n" in h for h in header):
+        raise ValueError(f"header = {header!r}: column names must not contain commas or line breaks")
+    arrays = [_column(name, c) for name, c in zip(header, columns, strict=True)]
     if len({len(a) for a in arrays}) > 1:
         raise ValueError(f"columns must all have the same length, got {[len(a) for a in arrays]}")
-    data = np.column_stack(arrays)
-    np.savetxt(path, data, fmt=fmt, delimiter=",", header=",".join(header), comments="")
+    cells = [_format_column(a, fmt, nan) for a in arrays]
+    with open(path, "w") as f:
+        f.write(",".join(header) + "\n")
+        for row in zip(*cells, strict=True):
+            f.write(",".join(row) + "\n")
+
+
+def _column(name: str, column) -> np.ndarray:
+    """A 1-D float64 array, or a 1-D array of `str` for a text column."""
+    a = np.asarray(column)
+    if a.dtype.kind in "OUS":
+        a = np.asarray([str(v) for v in a.ravel()], dtype=object)
+        if any(("," in v or "\n" in v or "\r" in v) for v in a):
+            raise ValueError(f"column {name!r}: text entries must not contain commas or line breaks")
+        return a
+    return np.asarray(a, dtype=float).ravel()
+
+
+def _format_column(a: np.ndarray, fmt: str, nan: str | None) -> list[str]:
+    if a.dtype == object:
+        return list(a)
+    return [nan if nan is not None and np.isnan(v) else fmt % v for v in a.tolist()]
 
 
 def read_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
-    """Read a CSV written by `write_csv`: a dict column name → float64 array."""
+    """Read a numeric CSV written by `write_csv`: a dict column name → float64 array."""
     with open(path) as f:
         header = f.readline().strip().split(",")
     data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)

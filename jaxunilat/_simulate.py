@@ -186,6 +186,7 @@ def simulate(
     max_steps: int | None = None,
     max_events: int = 2048,
     dtmax: ArrayLike | None = None,
+    piece_solver: str = "tsit5",
     ts: ArrayLike | None = None,
     samples: int = 1001,
     outputs: tuple[str, ...] = ("x", "v"),
@@ -208,6 +209,7 @@ def simulate(
     - `max_steps`: the step budget (see `SolverSettings`).
     - `max_events`: the event mode's event buffer size.
     - `dtmax`: the event mode's largest step, s.
+    - `piece_solver`: the event mode's Runge–Kutta pair, `"tsit5"` or `"dopri8"`.
     - `ts`: save times, s, sorted within [t0, t1]. Default: `samples` uniform
       times over [t0, t1], both ends included.
     - `outputs`: which outputs to save, from `model.output_names`
@@ -266,5 +268,6 @@ def simulate(
         max_steps=max_steps,
         max_events=max_events,
         dtmax=dtmax,
+        piece_solver=piece_solver,
     )
     return _solve(model, y0, t0, t1, ts, settings, outputs, bool(throw))

@@ -64,6 +64,9 @@ class SolverSettings(eqx.Module):
     - `subgrid`: how many points per step the event mode checks for crossings
       (static, besides the observable's extremum). Default 4.
     - `dtmax`: the event mode's largest step, s (`None`: no cap).
+    - `piece_solver`: the event mode's Runge–Kutta pair for the smooth pieces:
+      `"tsit5"` (5th order) or `"dopri8"` (8th order, fewer steps at tight
+      tolerances). Static.
     """
 
     method: str = eqx.field(static=True)
@@ -76,6 +79,7 @@ class SolverSettings(eqx.Module):
     max_events: int = eqx.field(static=True, default=2048)
     subgrid: int = eqx.field(static=True, default=4)
     dtmax: Array | None = None
+    piece_solver: str = eqx.field(static=True, default="tsit5")
 
     def diffrax_solver(self):
         return RK4() if self.method == "rk4" else dfx.Tsit5()
@@ -97,6 +101,7 @@ def make_settings(
     max_events: int = 2048,
     subgrid: int = 4,
     dtmax=None,
+    piece_solver: str = "tsit5",
 ) -> SolverSettings:
     """Validate the solver arguments and build `SolverSettings`."""
     check_choice("solver", method, SOLVERS)
@@ -118,6 +123,7 @@ def make_settings(
     for name, value, low in (("max_events", max_events, 1), ("subgrid", subgrid, 1)):
         if not isinstance(value, (int, np.integer)) or value < low:
             raise ValueError(f"{name} = {value!r} is out of range; valid range is integers >= {low}")
+    check_choice("piece_solver", piece_solver, ("tsit5", "dopri8"))
     check_range("dtmax", dtmax, lo=0.0, lo_open=True, unit="s", allow_none=True)
     if method == "rk4" and is_concrete(dt) and is_concrete(span):
         needed = math.ceil(float(span) / float(np.min(np.asarray(dt))))
@@ -135,4 +141,5 @@ def make_settings(
         max_events=int(max_events),
         subgrid=int(subgrid),
         dtmax=None if dtmax is None else jnp.asarray(dtmax, dtype=float),
+        piece_solver=piece_solver,
     )

@@ -148,3 +148,54 @@ def test_console_script_module_entry_point():
     )
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1 and "mass" in proc.stderr
+
+
+def test_events_writes_contact_table(tmp_path, capsys):
+    events = tmp_path / "contacts.csv"
+    code, out, err = _run(
+        ["simulate", "ball", "--solver", "event", "--t1", "2", "--samples", "11", "--events", str(events)],
+        capsys,
+    )
+    assert code == 0, err
+    lines = events.read_text().splitlines()
+    assert lines[0] == "wall,t_in,t_out,v_in,v_out,restitution,peak_force,max_penetration"
+    rows = [line.split(",") for line in lines[1:]]
+    # SPEC §2.2 (trusted reference): 8 contacts over [0, 2] s, 3 of them upper.
+    assert len(rows) == 8
+    assert [r[0] for r in rows].count("upper") == 3
+    ref = scipy_reference(BallParams.table1(2), (-0.4, -1 / 0.122), 2.0).contacts
+    t_in = np.array([float(r[1]) for r in rows])
+    assert np.max(np.abs(t_in - [c.t_in for c in ref])) < 1e-8
+    assert f"wrote      {events} (contact table: 8 contacts)" in out
+
+
+def test_events_contact_open_at_t1_has_empty_fields(tmp_path, capsys):
+    events = tmp_path / "contacts.csv"
+    # The first upper contact lasts from 0.121668 s to about 0.1232 s (SPEC §2.2).
+    argv = ["simulate", "ball", "--solver", "event", "--t1", "0.1225", "--samples", "11"]
+    code, _, err = _run([*argv, "--events", str(events)], capsys)
+    assert code == 0, err
+    last = events.read_text().splitlines()[-1].split(",")
+    assert last[0] == "upper" and last[2] == last[4] == last[5] == ""
+    assert float(last[6]) > 0 and float(last[7]) > 0
+
+
+def test_events_needs_event_solver(tmp_path, capsys):
+    events = tmp_path / "contacts.csv"
+    code, _, err = _run(["simulate", "ball", "--events", str(events)], capsys)
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("jaxunilat: error:")
+    assert "--events needs --solver event" in lines[0]
+    assert not events.exists()
+
+
+def test_events_output_path_checks(tmp_path, capsys):
+    base = ["simulate", "ball", "--solver", "event"]
+    code, _, err = _run([*base, "--events", str(tmp_path)], capsys)
+    assert code == 2 and "directory" in err
+    code, _, err = _run([*base, "--events", str(tmp_path / "missing" / "x.csv")], capsys)
+    assert code == 2 and "does not exist" in err
+    same = str(tmp_path / "same.csv")
+    code, _, err = _run([*base, "--out", same, "--events", same], capsys)
+    assert code == 2 and "same file" in err and len(err.strip().splitlines()) == 1
