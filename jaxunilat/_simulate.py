@@ -15,7 +15,7 @@ from ._event import EventRecord, event_solve
 from ._heaviside import Exact
 from ._model import AbstractModel
 from ._solvers import SolverSettings, make_settings
-from ._validate import check_choice, check_range, is_concrete
+from ._validate import as_float_array, check_choice, check_range, is_concrete
 
 #: How many times each jitted function was traced (compiled). Tests and the
 #: benchmark read it to prove that new parameter values do not retrace.
@@ -171,7 +171,7 @@ def _time_span(t_span):
     check_range("t1", t1, unit="s")
     if is_concrete(t0) and is_concrete(t1) and not float(t1) > float(t0):
         raise ValueError(f"t1 = {float(t1):g} s is out of range; valid range is t1 > t0 = {float(t0):g} s")
-    return jnp.asarray(t0, dtype=float), jnp.asarray(t1, dtype=float)
+    return as_float_array(t0), as_float_array(t1)
 
 
 def simulate(
@@ -231,7 +231,7 @@ def simulate(
         raise ValueError("outputs = () is empty; request at least one of " + ", ".join(model.output_names))
     for name in outputs:
         check_choice("output", name, model.output_names)
-    y0 = jnp.asarray(y0, dtype=float)
+    y0 = as_float_array(y0)
     if y0.shape != (len(model.state_names),):
         raise ValueError(
             f"y0 has shape {y0.shape}; expected ({len(model.state_names)},) for the state "
@@ -242,9 +242,12 @@ def simulate(
     if ts is None:
         if not isinstance(samples, (int, np.integer)) or samples < 2:
             raise ValueError(f"samples = {samples!r} is out of range; valid range is integers >= 2")
-        ts = jnp.linspace(t0, t1, int(samples))
+        if is_concrete(t0) and is_concrete(t1):
+            ts = np.linspace(float(t0), float(t1), int(samples))
+        else:
+            ts = jnp.linspace(t0, t1, int(samples))
     else:
-        ts = jnp.asarray(ts, dtype=float)
+        ts = as_float_array(ts)
         if ts.ndim != 1 or ts.shape[0] < 1:
             raise ValueError(f"ts has shape {ts.shape}; expected a non-empty 1-D array of times in s")
         if is_concrete(ts) and is_concrete(t0) and is_concrete(t1):

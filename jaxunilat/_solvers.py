@@ -8,11 +8,10 @@ from typing import ClassVar
 
 import diffrax as dfx
 import equinox as eqx
-import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
-from ._validate import check_choice, check_range, is_concrete
+from ._validate import as_float_array, check_choice, check_range, is_concrete
 
 _rk4_tableau = dfx.ButcherTableau(
     a_lower=(
@@ -115,7 +114,7 @@ def make_settings(
     elif method == "rk4":
         if not (is_concrete(dt) and is_concrete(span)):
             raise ValueError("max_steps must be given when dt or the time span is traced (rk4)")
-        max_steps = int(math.ceil(float(span) / float(jnp.min(jnp.asarray(dt))))) + 16
+        max_steps = int(math.ceil(float(span) / float(np.min(np.asarray(dt))))) + 16
     elif method == "event":
         max_steps = 16_384
     else:
@@ -135,11 +134,11 @@ def make_settings(
     return SolverSettings(
         method=method,
         max_steps=max_steps,
-        dt=None if dt is None else jnp.asarray(dt, dtype=float),
-        rtol=jnp.asarray(rtol, dtype=float),
-        atol=jnp.asarray(atol, dtype=float),
+        dt=None if dt is None else as_float_array(dt),
+        rtol=as_float_array(rtol),
+        atol=as_float_array(atol),
         max_events=int(max_events),
         subgrid=int(subgrid),
-        dtmax=None if dtmax is None else jnp.asarray(dtmax, dtype=float),
+        dtmax=None if dtmax is None else as_float_array(dtmax),
         piece_solver=piece_solver,
     )

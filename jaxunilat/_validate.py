@@ -17,6 +17,17 @@ def is_concrete(value) -> bool:
     return not isinstance(value, jax.core.Tracer)
 
 
+def as_float_array(value):
+    """A float64 array for a jitted call, without a device dispatch for plain numbers.
+
+    Python and NumPy inputs become NumPy arrays (jit traces them like any array);
+    JAX arrays and tracers pass through, cast to float64 only if needed.
+    """
+    if isinstance(value, (jax.Array, jax.core.Tracer)):
+        return value if value.dtype == np.float64 else value.astype(np.float64)
+    return np.asarray(value, dtype=np.float64)
+
+
 def _values(value):
     return np.asarray(value, dtype=float).ravel()
 

@@ -196,8 +196,8 @@ def test_gradients_vs_reference_finite_differences():
 
 
 def test_vmap_equals_separate_runs():
-    kappas = np.array([5e3, 1e4, 1.5e4, 2e4])
-    k_rs = np.array([0.1, 0.2, 0.3, 0.15])
+    kappas = np.repeat(np.array([5e3, 1e4, 1.5e4, 2e4]), 4)
+    k_rs = np.tile(np.array([0.1, 0.2, 0.3, 0.15]), 4)
 
     def run(kappa, k_r, max_steps=MAX_STEPS):
         ball = jaxunilat.Ball.table1(2, kappa=kappa, k_r=k_r)
@@ -207,8 +207,8 @@ def test_vmap_equals_separate_runs():
     # the buffer size does not change the arithmetic, and the separate runs reuse the
     # shared compiled configuration.
     batch = jax.vmap(lambda a, b: run(a, b, max_steps=1024))(jnp.asarray(kappas), jnp.asarray(k_rs))
-    assert batch.ys["x"].shape == (4, SAMPLES)
-    for i in range(4):
+    assert batch.ys["x"].shape == (16, SAMPLES)
+    for i in range(16):
         one = run(kappas[i], k_rs[i])
         assert int(one.status) == int(batch.status[i]) == jaxunilat.Status.SUCCESS
         assert int(one.events.count) == int(batch.events.count[i])
@@ -267,3 +267,98 @@ def test_grazing_apex_at_upper_wall():
     t, kind, wall, _ = valid_events(sol)
     lower_entries = t[(kind == ENTRY) & (wall == 0)]
     assert len(lower_entries) and abs(lower_entries[0] - flight) <= 1e-9
+
+
+# -- pitfalls ------------------------------------------------------------------------------------
+
+
+def test_shallow_excursion_beyond_a_wall_is_not_skipped():
+    """A drag-free apex 1 µm beyond the upper wall: a parabola has a zero error estimate,
+    so an uncapped step could jump over the whole excursion (SPEC §3)."""
+    g, lo, hi = 9.81, -0.4, 0.4
+    v0 = math.sqrt(2 * g * (hi - lo + 1e-6))
+    params = BallParams.table1(2, drag=None)
+    ref = scipy_reference(params, (lo, v0), 1.0)
+    sol = event(jaxunilat.Ball.table1(2, drag=None), (lo, v0), 1.0, 1e-10)
+    t, kind, wall, _ = valid_events(sol)
+    upper_in = t[(kind == ENTRY) & (wall == 1)]
+    ref_upper = [c.t_in for c in ref.contacts if c.wall == "upper"]
+    assert len(ref_upper) == 1 and len(upper_in) == 1
+    assert abs(upper_in[0] - ref_upper[0]) <= 1e-8
+    assert max_dx(sol, ref) <= 1e-8
+
+
+def test_fixed_step_convergence_order_is_at_least_three(ref_ex2):
+    """Step halving with the steps pinned by dtmax (tolerances loose enough to accept
+    every step): the located-contact scheme keeps a high order through the impacts."""
+    ts = np.linspace(0.0, 0.13, 131)  # the initial lower contact and the first upper one
+    x_ref, _ = ref_ex2(ts)
+    errors = []
+    for h in (4e-4, 2e-4, 1e-4):
+        sol = jaxunilat.simulate(
+            jaxunilat.Ball.table1(2),
+            jnp.asarray(PAPER_Y0),
+            0.13,
+            solver="event",
+            rtol=1.0,
+            atol=1.0,
+            dtmax=h,
+            ts=ts,
+            max_steps=4096,
+            max_events=64,
+        )
+        errors.append(float(np.max(np.abs(np.asarray(sol.ys["x"]) - x_ref))))
+    orders = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
+    print(f"fixed-step errors {errors}, observed orders {orders}")
+    assert np.all(orders >= 3.0)
+
+
+def test_root_finder_reaches_machine_precision_and_differentiates():
+    from jaxunilat._event import _locate
+
+    # Far from the origin float64 spacing is ~1e-13: no tolerance is requested, the
+    # bracket just stops shrinking.
+    root = float(_locate(lambda s: s - 1000.1, jnp.asarray(1000.0), jnp.asarray(1000.2)))
+    assert abs(root - 1000.1) <= 2 * np.spacing(1000.1)
+    # A nearly flat function (slope 1e-12) and a steep one.
+    assert abs(float(_locate(lambda s: 1e-12 * (s - 0.3), jnp.asarray(0.0), jnp.asarray(1.0))) - 0.3) < 1e-15
+    assert (
+        abs(float(_locate(lambda s: jnp.expm1(50 * (s - 0.7)), jnp.asarray(0.0), jnp.asarray(1.0))) - 0.7)
+        < 1e-15
+    )
+    # The implicit-function derivative of the root of s² − θ: d√θ/dθ = 1/(2√θ).
+    grad = jax.grad(lambda th: _locate(lambda s: s**2 - th, jnp.asarray(0.0), jnp.asarray(2.0)))(0.3)
+    assert abs(float(grad) - 0.5 / math.sqrt(0.3)) <= 1e-12
+
+
+@pytest.mark.slow
+def test_apex_height_gradient_vs_reference_finite_differences():
+    """d(apex height after the first bounce)/d(κ, k_r, x0, v0) for a drop test with drag,
+    against central differences of the scipy reference's exit speed and the drag closed
+    form for the apex, h = ln(1 + k²v²)/(2 g k²) above the surface (SPEC §8)."""
+    k, g = 0.122, 9.81
+
+    def ref_apex(p):
+        kappa, k_r, x0, v0 = p
+        params = BallParams(kappa=kappa, k_r=k_r, drag=k, lower=0.0, upper=None)
+        contact = scipy_reference(params, (x0, v0), 0.6).contacts[0]
+        return math.log1p((k * contact.v_out) ** 2) / (2 * g * k**2)
+
+    def apex(p):
+        ball = jaxunilat.Ball(kappa=p[0], k_r=p[1], drag=k, lower=0.0, upper=None)
+        sol = jaxunilat.simulate(
+            ball, p[2:], 0.6, solver="event", rtol=1e-12, atol=1e-12, samples=2, max_steps=4096, max_events=64
+        )
+        return jaxunilat.apexes(sol, 1)[1][0]
+
+    p0 = np.array([1e4, 0.2, 0.3, -0.5])
+    value = float(apex(jnp.asarray(p0)))
+    assert abs(value - ref_apex(p0)) <= 1e-9
+    grad = np.asarray(jax.grad(apex)(jnp.asarray(p0)))
+    for i, rel in enumerate((1e-5, 1e-5, 1e-6, 1e-6)):
+        step = rel * abs(p0[i])
+        e = np.zeros(4)
+        e[i] = step
+        fd = (ref_apex(p0 + e) - ref_apex(p0 - e)) / (2 * step)
+        print(f"d apex / d p[{i}]: AD {grad[i]:.10e}, FD {fd:.10e}")
+        assert abs(grad[i] - fd) <= 1e-5 * abs(fd)
