@@ -173,20 +173,6 @@ def _contact_starts(contact, x):
     return len(starts), len(starts) - upper, upper
 
 
-def _located_contacts(events):
-    """Contacts located by the event mode: (total, lower, upper), a contact open at t0 included."""
-    count = int(events.count)
-    kind = np.asarray(events.kind)[:count]
-    wall = np.asarray(events.wall)[:count]
-    switches = kind[(kind == 1) | (kind == 2)]
-    walls = wall[(kind == 1) | (kind == 2)]
-    starts = list(walls[switches == 1])
-    if switches.size and switches[0] == 2:  # the run started in contact
-        starts.insert(0, walls[0])
-    upper = sum(1 for w in starts if w == 1)
-    return len(starts), len(starts) - upper, upper
-
-
 def _failure_message(status, args, ball) -> str:
     from ._simulate import Status
 
@@ -264,9 +250,13 @@ def _run_simulate_ball(args) -> int:
         raise RunError(_failure_message(status, args, ball))
 
     ts, x, v = (np.asarray(a, dtype=float) for a in (sol.ts, sol["x"], sol["v"]))
+    table = None
     if sol.events is not None:
-        n, lower, upper = _located_contacts(sol.events)
-        where = "located"
+        from ._observe import contact_table
+
+        table = contact_table(sol, ball)
+        n, upper = len(table["t_in"]), int(np.sum(table["wall"] == "upper"))
+        lower, where = n - upper, "located"
     else:
         n, lower, upper = _contact_starts(sol["contact"], x)
         where = "on the output grid"
@@ -299,9 +289,8 @@ def _run_simulate_ball(args) -> int:
             lines.append(("wrote", f"{args.plot} (x(t), v(t), v(x))"))
         if args.events is not None:
             from ._io import write_csv
-            from ._observe import CONTACT_COLUMNS, contact_table
+            from ._observe import CONTACT_COLUMNS
 
-            table = contact_table(sol, ball)
             columns = [table[name] for name in CONTACT_COLUMNS]
             write_csv(args.events, CONTACT_COLUMNS, columns, nan="")
             lines.append(("wrote", f"{args.events} (contact table: {len(table['t_in'])} contacts)"))

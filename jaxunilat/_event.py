@@ -41,7 +41,6 @@ ENTRY, EXIT, EXTREMUM = 1, 2, 3
 _ITERATIONS = 12
 _REC = 3  # leading columns of a step record: t0, t1, t_end
 _EV = 4  # leading columns of an event record: t, kind, wall, peak force
-_LOOP_KIND = "checkpointed"
 
 
 class EventRecord(eqx.Module):
@@ -131,7 +130,13 @@ def _locate(f, a, b):
 
 
 def event_solve(model, y0, t0, t1, ts, settings, outputs):
-    """Integrate `model` in event mode. Returns (ys, y1, status, stats, events)."""
+    """Integrate `model` in event mode.
+
+    **Returns:** `(ys, y1, done, nonfinite, overflow, stats, events)`: the outputs at
+    `ts`, the final state, whether t1 was reached, whether the solution became
+    non-finite, whether the event buffer overflowed, the step counts and the
+    `EventRecord`.
+    """
     solver_cls, exponent = PIECE_SOLVERS[settings.piece_solver]
     stages = len(solver_cls.tableau.c) + 1
     n = y0.shape[0]
@@ -177,7 +182,7 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         n_events=jnp.where(start_in_contact, 1, 0),
         overflow=jnp.array(False),
         nonfinite=jnp.array(False),
-        # One row per accepted step: [t0, t1, t_end, y0 (n), k (7n)]; t_end = +inf unused.
+        # One row per accepted step: [t0, t1, t_end, y0 (n), k (stages·n)]; t_end = +inf unused.
         rec=jnp.zeros((max_steps, _REC + (stages + 1) * n), dtype).at[:, 2].set(jnp.inf),
         # One row per event: [t, kind, wall, peak force, y (n)]; a contact open at t0
         # is recorded as an entry at t0.
@@ -337,7 +342,7 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
     # The carry outside the buffers is a few dozen numbers, so every step can be a
     # checkpoint: reverse mode then recomputes nothing.
     final = eqxi.while_loop(
-        cond, body, init, max_steps=max_steps, buffers=buffers, kind=_LOOP_KIND, checkpoints=max_steps
+        cond, body, init, max_steps=max_steps, buffers=buffers, kind="checkpointed", checkpoints=max_steps
     )
 
     # Outputs at the save times from the recorded interpolants.
