@@ -7,9 +7,12 @@ Exit codes: 0 success, 1 a run-time failure (the solver diverged or ran out of s
 a file could not be written), 2 bad user input. Every error is one line on stderr,
 `jaxunilat: error: ...`, with no traceback and no usage dump.
 
-Adding a command: write `_add_<name>(subparsers)` that adds its parser and sets
-`func=<handler>` (a function `args -> int`), then list it in `_COMMANDS`. Models under
-`simulate` are listed in `_SIMULATE_MODELS` the same way.
+Adding a command: write `add_<name>(subparsers)` that adds its parser and sets
+`func=<handler>` (a function `args -> int`), then list it in `_COMMANDS`, as
+`_lazy("module", "add_<name>")` when it lives in another module (keep such modules light
+to import: heavy imports go inside the handler). Models under `simulate` are listed in
+`_SIMULATE_MODELS` the same way. Handlers raise `UsageError`/`ValueError` for bad input
+(exit 2) and `RunError` for run-time failures (exit 1).
 """
 
 from __future__ import annotations
@@ -303,6 +306,19 @@ def _run_simulate_ball(args) -> int:
 
 # -- command table -------------------------------------------------------------------
 
+
+def _lazy(module: str, name: str):
+    """`add(subparsers)` that imports `module` only when the parser is built."""
+
+    def add(subparsers) -> None:
+        import importlib
+
+        getattr(importlib.import_module(module), name)(subparsers)
+
+    add.__name__ = name
+    return add
+
+
 #: `simulate <model>`: one function per model that adds its parser.
 _SIMULATE_MODELS = (_add_simulate_ball,)
 
@@ -317,7 +333,12 @@ def _add_simulate(commands) -> None:
 
 
 #: Top-level commands: one function per command that adds its parser.
-_COMMANDS = (_add_simulate,)
+_COMMANDS = (
+    _add_simulate,
+    _lazy("identify._cli_identify", "add_identify"),
+    _lazy("identify._cli_qualify", "add_qualify"),
+    _lazy("identify._cli_export", "add_export"),
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,34 @@
+"""identify: fit contact stiffness κ and damping k_r to rebound data with jaxunilat.
+
+The identification of [K90 §6]: bounce data (position traces, impact times, apex
+heights) in, κ and k_r with honest uncertainty out.
+
+Note: PyPI's `identify` (a pre-commit dependency) has the same import name; install
+jaxunilat in a dedicated virtual environment.
+"""
+
+import jaxunilat as _jaxunilat  # noqa: F401  (enables float64)
+
+from ._data import (  # noqa: E402
+    Dataset as Dataset,
+    load_dataset as load_dataset,
+    write_dataset as write_dataset,
+)
+from ._export import (  # noqa: E402
+    MujocoContact as MujocoContact,
+    mujoco_contact as mujoco_contact,
+)
+from ._fit import (  # noqa: E402
+    METHODS as METHODS,
+    default_optimizer as default_optimizer,
+    fit as fit,
+)
+from ._plot import plot_fit as plot_fit  # noqa: E402
+from ._problem import NUISANCE as NUISANCE, PARAMETERS as PARAMETERS  # noqa: E402
+from ._qualify import (  # noqa: E402
+    QualifyResult as QualifyResult,
+    qualify as qualify,
+    qualify_fit as qualify_fit,
+    rebound_height as rebound_height,
+)
+from ._result import FitResult as FitResult  # noqa: E402

@@ -1,0 +1,97 @@
+"""`jaxunilat identify`: fit κ and k_r to a data file and report them with uncertainty."""
+
+from __future__ import annotations
+
+import os
+
+
+def default_data_path() -> str:
+    """The bundled default data set, `data/drop_trace.csv` (a synthetic 1 kHz drop test)."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    for root in (os.path.join(here, os.pardir), os.getcwd()):
+        path = os.path.normpath(os.path.join(root, "data", "drop_trace.csv"))
+        if os.path.isfile(path):
+            return path
+    raise ValueError(
+        "no DATA given and the bundled data/drop_trace.csv was not found (it ships with the source tree); "
+        "pass a data file: jaxunilat identify DATA.csv"
+    )
+
+
+def add_identify(commands) -> None:
+    p = commands.add_parser(
+        "identify",
+        help="fit contact stiffness kappa and damping k_r to rebound data, with uncertainty",
+        description="Fit kappa and k_r of the Kelvin-Voigt ball model [K90 Eq. 3.1-3.3] to a rebound data "
+        "file (format: data/README.md) with the event mode; report estimates, 95%% CIs, derived e and t_c, "
+        "correlations and an identifiability verdict.",
+    )
+    p.add_argument(
+        "data", nargs="?", metavar="DATA.csv", help="data file (default: the bundled data/drop_trace.csv)"
+    )
+    p.add_argument("--json", metavar="OUT.json", help="write the fit as JSON")
+    p.add_argument("--plot", metavar="OUT.png", help="draw the data against the fit, with residuals")
+    p.add_argument("--starts", type=int, default=3, help="number of starts (default 3)")
+    p.add_argument(
+        "--fit",
+        default="",
+        metavar="NAMES",
+        help="nuisance parameters to fit too, comma-separated from drag,x0,v0,offset (offset: impact data only)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of the starts' jitter (default 0)")
+    p.add_argument("--method", choices=("lm", "optax"), default="lm", help="lm (default) or optax then lm")
+    p.add_argument("--profile", action="store_true", help="also compute the profile likelihood of kappa")
+    p.set_defaults(func=_run_identify)
+
+
+def _run_identify(args) -> int:
+    import json
+
+    from jaxunilat._cli import EXIT_OK, RunError
+    from jaxunilat._io import check_output_path
+
+    from ._data import load_dataset
+    from ._fit import fit
+    from ._problem import NUISANCE
+
+    nuisance = tuple(name.strip() for name in args.fit.split(",") if name.strip())
+    for name in nuisance:
+        if name not in NUISANCE:
+            raise ValueError(f"--fit {name!r} is not a nuisance parameter; valid: {', '.join(NUISANCE)}")
+    if args.starts < 1:
+        raise ValueError(f"--starts {args.starts} is out of range; valid range is integers >= 1")
+    for path in (args.json, args.plot):
+        if path is not None:
+            check_output_path(path)
+    if (
+        args.json is not None
+        and args.plot is not None
+        and os.path.abspath(args.json) == os.path.abspath(args.plot)
+    ):
+        raise ValueError(f"--json and --plot name the same file {args.json!r}")
+    data = load_dataset(args.data if args.data is not None else default_data_path())
+    result = fit(
+        data,
+        nuisance=nuisance,
+        starts=args.starts,
+        seed=args.seed,
+        method=args.method,
+        profile=args.profile,
+        progress=True,
+    )
+    print(result.report())
+    try:
+        if args.json is not None:
+            with open(args.json, "w", encoding="utf-8") as fh:
+                json.dump(result.to_json_dict(), fh, indent=2, allow_nan=False)
+            print(f"wrote {args.json}")
+        if args.plot is not None:
+            from jaxunilat._plot import save_figure
+
+            from ._plot import plot_fit
+
+            save_figure(plot_fit(result), args.plot)
+            print(f"wrote {args.plot}")
+    except OSError as err:
+        raise RunError(f"cannot write output: {err}") from None
+    return EXIT_OK

@@ -1,0 +1,91 @@
+"""Closed-form initial guesses for the restitution e (SPEC §5).
+
+The contact time t_c is not visible in rebound heights or flight times to first order,
+so the guess takes it from a prior (0.5–2 ms for a table-tennis ball, SPEC §5); the
+multi-start spreads over that prior. With (e, t_c) the Kelvin–Voigt inverse gives
+(κ, k_r), `jaxunilat.parameters_from_restitution`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+#: The contact-time prior, s (SPEC §5: no public measurement; 0.5–2 ms).
+CONTACT_TIME_PRIOR = (0.5e-3, 2.0e-3)
+#: The prior's centre (geometric mean), s.
+CONTACT_TIME_GUESS = math.sqrt(CONTACT_TIME_PRIOR[0] * CONTACT_TIME_PRIOR[1])
+
+_E_RANGE = (0.05, 0.995)
+
+
+def _clip_e(e: float) -> float:
+    return float(np.clip(e, *_E_RANGE)) if np.isfinite(e) else 0.8
+
+
+def restitution_from_heights(heights, drop_height: float | None = None) -> float:
+    """e ≈ √(h_{k+1}/h_k), the median over successive rebound apex heights (drag-free).
+
+    With only one height, the drop height h_0 supplies the first ratio.
+    """
+    h = np.asarray(heights, dtype=float)
+    if drop_height is not None and drop_height > 0:
+        h = np.concatenate([[drop_height], h])
+    h = h[h > 0]
+    if len(h) < 2:
+        return 0.8
+    return _clip_e(float(np.median(np.sqrt(h[1:] / h[:-1]))))
+
+
+def restitution_from_impacts(times) -> float:
+    """e ≈ T_{k+1}/T_k, the median ratio of successive flight times (drag-free: T = 2v/g)."""
+    t = np.asarray(times, dtype=float)
+    flights = np.diff(t)
+    if len(flights) < 2:
+        return 0.8
+    return _clip_e(float(np.median(flights[1:] / flights[:-1])))
+
+
+def apex_heights_of_trace(t, x, noise: float | None = None) -> np.ndarray:
+    """Rebound apex heights of a drop-test trace: the maxima of x between contacts.
+
+    A contact is where x falls within a band above the trace's minimum (3σ or 2% of
+    the range); the release flight (before the first contact) is dropped.
+    """
+    x = np.asarray(x, dtype=float)
+    span = float(np.max(x) - np.min(x))
+    band = max(3.0 * (noise or 0.0), 0.02 * span)
+    low = x <= np.min(x) + band
+    heights = []
+    start = None
+    seen_contact = False
+    for i, is_low in enumerate(low):
+        if is_low:
+            if start is not None and seen_contact and i - start > 2:
+                heights.append(float(np.max(x[start:i])))
+            start = None
+            seen_contact = True
+        elif start is None:
+            start = i
+    return np.asarray(heights)
+
+
+def initial_restitution(data) -> float | None:
+    """The closed-form e for a data set, or None where there is none (two-racket traces)."""
+    if data.observe == "apex":
+        drop = data.x0 if data.scene == "drop" and data.v0 == 0 else None
+        return restitution_from_heights(data.h, drop)
+    if data.observe == "impacts":
+        return restitution_from_impacts(data.t)
+    if data.scene == "drop":
+        heights = apex_heights_of_trace(data.t, data.x, data.noise)
+        if len(heights) >= 1:
+            drop = data.x0 if data.v0 == 0 else None
+            return restitution_from_heights(heights, drop)
+    return None
+
+
+def first_impact_time(x0: float, v0: float, gravity: float) -> float:
+    """Drag-free fall time from height x0 > 0 with upward speed v0 to x = 0, s."""
+    return (v0 + math.sqrt(v0 * v0 + 2.0 * gravity * max(x0, 0.0))) / gravity

@@ -1,0 +1,185 @@
+"""identify.fit against data made by the independent scipy reference (tests/reference.py).
+
+The true parameters are not the paper's: κ = 1.6e4 N/m, k_r = 0.15 N·s/m on a 2.7 g
+ball (e ≈ 0.955, t_c ≈ 1.3 ms), dropped from 0.30 m with drag 0.12 s/m onto x = 0.
+Every data set is the scipy DOP853 + event-location solution plus Gaussian noise.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from reference import BallParams, kelvin_voigt_contact_time, kelvin_voigt_restitution, scipy_reference
+
+import identify
+import jaxunilat as ju
+from jaxunilat._cli import main
+
+TRUE = dict(kappa=1.6e4, k_r=0.15)
+MASS, DRAG, X0 = 2.7e-3, 0.12, 0.30
+E_TRUE = kelvin_voigt_restitution(TRUE["kappa"], TRUE["k_r"], MASS)
+TC_TRUE = kelvin_voigt_contact_time(TRUE["kappa"], TRUE["k_r"], MASS)
+OFFSET = 0.0412  # the recording's clock minus the release time, s
+
+
+@pytest.fixture(scope="module")
+def reference():
+    params = BallParams(kappa=TRUE["kappa"], k_r=TRUE["k_r"], mass=MASS, drag=DRAG, lower=0.0, upper=None)
+    return scipy_reference(params, (X0, 0.0), 4.0, rtol=1e-12, atol=1e-14)
+
+
+def _dataset(observe, **columns):
+    return identify.Dataset(
+        scene="drop", observe=observe, mass=MASS, drag=DRAG, x0=X0, v0=0.0, source="test", **columns
+    )
+
+
+def _trace(reference, seed, *, t1=1.5, rate=1000.0, noise=5e-4):
+    t = np.arange(0.0, t1 + 0.5 / rate, 1.0 / rate)
+    x, _ = reference(t)
+    x = x + np.random.default_rng(seed).normal(0.0, noise, t.shape)
+    return _dataset("trace", t=t, x=np.round(x, 7), noise=noise)
+
+
+def _impacts(reference, seed, *, n=10, noise=2e-5):
+    t = reference.impact_times()[:n] + OFFSET
+    return _dataset("impacts", t=t + np.random.default_rng(seed).normal(0.0, noise, n), noise=noise)
+
+
+def _apex_heights(reference, n):
+    """Rebound apex heights from the reference: the max of x over each flight (1e-6 s grid)."""
+    heights = []
+    contacts = reference.contacts
+    for before, after in zip(contacts[:-1], contacts[1:], strict=False):
+        ts = np.arange(before.t_out, after.t_in, 1e-6)
+        heights.append(float(np.max(reference(ts)[0])))
+        if len(heights) == n:
+            break
+    return np.asarray(heights)
+
+
+def _covers(entry, truth):
+    lo, hi = entry["ci95"]
+    return lo <= truth <= hi
+
+
+def test_trace_recovers_kappa_and_k_r(reference):
+    result = identify.fit(_trace(reference, seed=1), starts=2)
+    print("\n" + result.report())
+    assert result.converged, result.message
+    for name, truth in TRUE.items():
+        entry = result.parameters[name]
+        assert abs(entry["value"] / truth - 1) <= 0.05, (name, entry, truth)
+        assert _covers(entry, truth), (name, entry, truth)
+    assert result.identifiable["kappa"] and result.identifiable["k_r"] and result.identifiable["restitution"]
+    # The noise level is consistent with the file's σ (reduced χ² near 1).
+    assert 0.8 <= result.chi2 / (len(result.residuals) - 2) <= 1.2
+
+
+def test_impacts_recover_restitution_with_unknown_offset(reference):
+    result = identify.fit(_impacts(reference, seed=2), nuisance=("offset",), starts=2)
+    print("\n" + result.report())
+    assert result.converged, result.message
+    assert abs(result.derived["restitution"]["value"] - E_TRUE) <= 0.005
+    assert abs(result.parameters["offset"]["value"] - OFFSET) <= 1e-3
+    assert _covers(result.derived["restitution"], E_TRUE)
+
+
+def test_apex_heights_identify_e_but_not_kappa(reference):
+    heights = _apex_heights(reference, 8)
+    noise = 1e-3
+    data = _dataset(
+        "apex", h=heights + np.random.default_rng(3).normal(0.0, noise, len(heights)), noise=noise
+    )
+    result = identify.fit(data, starts=2)
+    print("\n" + result.report())
+    assert abs(result.derived["restitution"]["value"] - E_TRUE) <= 0.01
+    assert result.identifiable["restitution"]
+    assert not result.identifiable["kappa"]
+    assert not result.identifiable["k_r"]
+    # SPEC §5: apex heights leave log κ essentially undetermined (sd ≈ 7 at 1 mm noise).
+    kappa = result.parameters["kappa"]
+    assert kappa["ci95"][1] / kappa["ci95"][0] > 10
+
+
+@pytest.mark.slow
+def test_confidence_intervals_cover_the_truth(reference):
+    """Over 20 noise realizations, the 95% CIs of κ and e cover the truth about 95% of the time.
+
+    With n = 20 and p = 0.95, fewer than 16 covers has probability 0.3%.
+    """
+    covers = {"kappa": 0, "k_r": 0, "restitution": 0}
+    for seed in range(20):
+        result = identify.fit(_impacts(reference, seed=100 + seed, n=8), nuisance=("offset",), starts=1)
+        covers["kappa"] += _covers(result.parameters["kappa"], TRUE["kappa"])
+        covers["k_r"] += _covers(result.parameters["k_r"], TRUE["k_r"])
+        covers["restitution"] += _covers(result.derived["restitution"], E_TRUE)
+    print("\ncoverage of 20:", covers)
+    assert all(count >= 16 for count in covers.values()), covers
+
+
+def test_frozen_parameter_and_derived_contact_time(reference):
+    data = _trace(reference, seed=4, t1=1.0)
+    result = identify.fit(data, freeze=("k_r",), initial={"k_r": TRUE["k_r"]}, starts=1)
+    assert result.parameters["k_r"]["value"] == pytest.approx(TRUE["k_r"], rel=1e-12)
+    assert result.parameters["k_r"]["stderr"] == 0.0
+    assert result.free == ["kappa"]
+    assert abs(result.kappa / TRUE["kappa"] - 1) <= 0.05
+    assert abs(result.derived["contact_time"]["value"] / TC_TRUE - 1) <= 0.05
+
+
+def test_no_retrace_between_fits_of_the_same_shape(reference):
+    identify.fit(_impacts(reference, seed=5, n=8), nuisance=("offset",), starts=1)
+    before = dict(ju.trace_counts())
+    result = identify.fit(_impacts(reference, seed=6, n=8), nuisance=("offset",), starts=2)
+    assert result.simulations > 2
+    assert ju.trace_counts() == before
+
+
+def test_json_schema_and_cli(tmp_path, reference):
+    heights = _apex_heights(reference, 6)
+    data = _dataset("apex", h=heights, noise=1e-3)
+    path = tmp_path / "apex.csv"
+    identify.write_dataset(path, data)
+    before = path.read_bytes()
+    out = tmp_path / "fit.json"
+    assert main(["identify", str(path), "--json", str(out), "--starts", "1"]) == 0
+    assert path.read_bytes() == before
+    doc = json.loads(out.read_text())
+    assert set(doc) >= {"parameters", "derived", "identifiable", "correlation", "converged"}
+    assert set(doc["parameters"]) == {"kappa", "k_r"}
+    assert set(doc["derived"]) == {"restitution", "contact_time"}
+    for entry in list(doc["parameters"].values()) + list(doc["derived"].values()):
+        assert set(entry) == {"value", "stderr", "ci95"} and len(entry["ci95"]) == 2
+    assert set(doc["identifiable"]) >= {"kappa", "k_r", "restitution"}
+    assert doc["identifiable"]["kappa"] is False and doc["identifiable"]["restitution"] is True
+    assert len(doc["correlation"]) == 2 and all(len(row) == 2 for row in doc["correlation"])
+    assert isinstance(doc["converged"], bool)
+    assert math.isclose(doc["mass"], MASS)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(nuisance=("spin",)), "nuisance"),
+        (dict(nuisance=("offset",)), "offset"),
+        (dict(freeze=("kappa", "k_r")), "nothing to fit"),
+        (dict(starts=0), "starts"),
+        (dict(method="bfgs"), "method"),
+        (dict(bounds={"kappa": (2.0, 1.0)}), "bounds"),
+        (dict(initial={"kappa": -1.0}), "kappa"),
+        (dict(optimizer="adam"), "optimizer"),
+    ],
+)
+def test_bad_fit_arguments(kwargs, match):
+    data = _dataset("apex", h=np.array([0.25, 0.2, 0.16]))
+    with pytest.raises(ValueError, match=match):
+        identify.fit(data, **kwargs)
+
+
+def test_cli_bad_fit_flag(capsys):
+    assert main(["identify", "--fit", "spin"]) == 2
+    assert "--fit" in capsys.readouterr().err
