@@ -430,7 +430,7 @@ def fit(
         identifiable=identifiable,
         correlation=corr,
         cost=float(best["cost"]),
-        residuals=r * sigma * math.sqrt(s2) if not sigma_known else r * sigma,
+        residuals=r * sigma,  # r = (prediction − data)/σ, σ = 1 when the file states none
         chi2=float(np.sum(r**2)),
         sigma=math.sqrt(s2) * sigma if not sigma_known else sigma,
         sigma_source="file" if sigma_known else "residuals",

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 
@@ -21,10 +23,10 @@ def plot_fit(result, *, title: str | None = None):
     top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=(3, 1))
     residuals = np.asarray(result.residuals)
     if data.observe == "trace":
+        # The fit at the sample times (what the fit compared; no new compilation).
         t = np.asarray(data.t)
-        sol = result.simulate(t1=float(t[-1]), samples=max(2001, 4 * len(t)))
         top.plot(t, data.x, ".", ms=2, color="0.5", label="data")
-        top.plot(np.asarray(sol.ts), np.asarray(sol.ys["x"]), lw=1.0, color="C0", label="fit")
+        top.plot(t, np.asarray(data.x) + residuals, lw=1.0, color="C0", label="fit")
         top.set_ylabel("x [m]")
         bottom.plot(t, residuals * 1e3, ".", ms=2, color="C3")
         bottom.set_ylabel("fit - data [mm]")
@@ -44,9 +46,9 @@ def plot_fit(result, *, title: str | None = None):
     top.legend(loc="upper right")
     kappa, k_r = result.parameters["kappa"], result.parameters["k_r"]
     e = result.derived["restitution"]
+    name = os.path.basename(data.path) if data.path else "data"
     default = (
-        f"{data.path or 'data'}: kappa = {kappa['value']:.4g} N/m, k_r = {k_r['value']:.4g} N*s/m, "
-        f"e = {e['value']:.4f}"
+        f"{name}: kappa = {kappa['value']:.4g} N/m, k_r = {k_r['value']:.4g} N*s/m, e = {e['value']:.4f}"
     )
     top.set_title(title or default, fontsize=10)
     for ax in (top, bottom):

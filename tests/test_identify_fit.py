@@ -79,6 +79,21 @@ def test_trace_recovers_kappa_and_k_r(reference):
     assert 0.8 <= result.chi2 / (len(result.residuals) - 2) <= 1.2
 
 
+def test_noise_estimated_from_residuals_when_the_file_states_none(reference):
+    import dataclasses
+
+    known = _trace(reference, seed=7)
+    unknown = dataclasses.replace(known, noise=None)
+    with_sigma = identify.fit(known, starts=1)
+    without = identify.fit(unknown, starts=1)
+    assert without.sigma_source == "residuals" and with_sigma.sigma_source == "file"
+    # s² = Σr²/(N − p) estimates the generating σ = 0.5 mm (N = 1501: to a few percent).
+    assert without.sigma == pytest.approx(5e-4, rel=0.1)
+    assert without.kappa == pytest.approx(with_sigma.kappa, rel=1e-6)
+    ratio = without.parameters["kappa"]["stderr"] / with_sigma.parameters["kappa"]["stderr"]
+    assert ratio == pytest.approx(without.sigma / 5e-4, rel=1e-3)
+
+
 def test_impacts_recover_restitution_with_unknown_offset(reference):
     result = identify.fit(_impacts(reference, seed=2), nuisance=("offset",), starts=2)
     print("\n" + result.report())
