@@ -33,6 +33,8 @@ from ._contact import (  # noqa: E402
     restitution as restitution,
     symmetric_clearance_force as symmetric_clearance_force,
 )
+from ._coupling import TABLE2 as TABLE2, Coupling as Coupling  # noqa: E402
+from ._coupling_impacts import IMPACT_COLUMNS as IMPACT_COLUMNS, impact_table as impact_table  # noqa: E402
 from ._event import EventRecord as EventRecord  # noqa: E402
 from ._heaviside import (  # noqa: E402
     AbstractHeaviside as AbstractHeaviside,
@@ -42,6 +44,7 @@ from ._heaviside import (  # noqa: E402
     heaviside as heaviside,
 )
 from ._io import read_csv as read_csv, write_csv as write_csv  # noqa: E402
+from ._lyapunov import TangentCoupling as TangentCoupling, ftle as ftle  # noqa: E402
 from ._model import AbstractModel as AbstractModel  # noqa: E402
 from ._observe import (  # noqa: E402
     CONTACT_COLUMNS as CONTACT_COLUMNS,
@@ -50,6 +53,13 @@ from ._observe import (  # noqa: E402
     impact_times as impact_times,
 )
 from ._plot import plot_ball as plot_ball, save_figure as save_figure  # noqa: E402
+from ._plot_coupling import plot_coupling as plot_coupling, plot_impact_forces as plot_impact_forces  # noqa: E402
+from ._reproduce import reproduce as reproduce  # noqa: E402
+from ._sensitivity import (  # noqa: E402
+    SensitivityResult as SensitivityResult,
+    ball_sensitivity as ball_sensitivity,
+    coupling_sensitivity as coupling_sensitivity,
+)
 from ._simulate import (  # noqa: E402
     Solution as Solution,
     Status as Status,

@@ -320,7 +320,7 @@ def _lazy(module: str, name: str):
 
 
 #: `simulate <model>`: one function per model that adds its parser.
-_SIMULATE_MODELS = (_add_simulate_ball,)
+_SIMULATE_MODELS = (_add_simulate_ball, _lazy("jaxunilat._cli_coupling", "add_simulate_coupling"))
 
 
 def _add_simulate(commands) -> None:
@@ -337,6 +337,8 @@ _COMMANDS = (
     _add_simulate,
     _lazy("identify._cli_identify", "add_identify"),
     _lazy("identify._cli_qualify", "add_qualify"),
+    _lazy("jaxunilat._cli_coupling", "add_sensitivity"),
+    _lazy("jaxunilat._cli_coupling", "add_reproduce"),
     _lazy("identify._cli_export", "add_export"),
 )
 
