@@ -67,5 +67,6 @@ from ._simulate import (  # noqa: E402
     trace_counts as trace_counts,
 )
 from ._solvers import RK4 as RK4  # noqa: E402
+from ._sweep import sweep as sweep  # noqa: E402
 
 __version__ = "0.1.0"

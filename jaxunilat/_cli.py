@@ -340,6 +340,7 @@ _COMMANDS = (
     _lazy("jaxunilat._cli_coupling", "add_sensitivity"),
     _lazy("jaxunilat._cli_coupling", "add_reproduce"),
     _lazy("identify._cli_export", "add_export"),
+    _lazy("jaxunilat._cli_bench", "add_bench"),
 )
 
 

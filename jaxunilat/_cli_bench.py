@@ -1,0 +1,60 @@
+"""`jaxunilat bench [--quick] [--out DIR]`: the benchmark command (needs scipy: the `bench` extra)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+
+def add_bench(commands) -> None:
+    """Add the `bench` command to the top-level subparsers."""
+    p = commands.add_parser(
+        "bench",
+        help="benchmark run time against error, throughput, gradient cost and compile time",
+        description="Benchmark Table 1 example 2 [K90] against scipy and NumPy peers in the same run; "
+        "write bench.json, work_precision.png and throughput.png and print the goal ratios P1-P5. "
+        'Needs scipy: pip install "jaxunilat[bench]".',
+    )
+    p.add_argument("--quick", action="store_true", help="a reduced run (under 3 minutes)")
+    p.add_argument("--out", metavar="DIR", default="bench_out", help="output folder (default bench_out)")
+    # For the test suite only: the smallest settings that still run every section.
+    p.add_argument("--size", choices=("full", "quick", "tiny"), default=None, help=argparse.SUPPRESS)
+    p.set_defaults(func=_run_bench)
+
+
+def _run_bench(args) -> int:
+    from ._cli import EXIT_OK, RunError, UsageError
+
+    try:
+        import scipy  # noqa: F401
+    except ImportError:
+        raise UsageError(
+            'jaxunilat bench needs scipy; install it with: pip install "jaxunilat[bench]"'
+        ) from None
+    size = args.size or ("quick" if args.quick else "full")
+    out = args.out
+    if os.path.exists(out) and not os.path.isdir(out):
+        raise ValueError(f"--out {out!r} exists and is not a folder")
+    try:
+        os.makedirs(out, exist_ok=True)
+    except OSError as err:
+        raise RunError(f"cannot create --out {out!r}: {err}") from None
+
+    import json
+
+    from ._bench import goal_table, run_bench
+    from ._bench_plot import throughput_figure, work_precision_figure
+
+    result = run_bench(size, log=lambda line: print(line, flush=True))
+    paths = {name: os.path.join(out, name) for name in ("bench.json", "work_precision.png", "throughput.png")}
+    try:
+        with open(paths["bench.json"], "w", encoding="utf-8") as fh:
+            json.dump(result, fh, indent=1, allow_nan=False)
+        work_precision_figure(result).savefig(paths["work_precision.png"], dpi=120)
+        throughput_figure(result).savefig(paths["throughput.png"], dpi=120)
+    except OSError as err:
+        raise RunError(f"cannot write output: {err}") from None
+    print()
+    print(goal_table(result))
+    print(f"\nwrote {', '.join(paths.values())} ({result['total_s']:.0f} s)")
+    return EXIT_OK

@@ -1,0 +1,143 @@
+"""`jaxunilat bench`: its reference, its peers, its bookkeeping, and a tiny end-to-end run.
+
+The benchmark's reference (`jaxunilat._bench_peers`) is package code; here it is checked
+against this suite's independent references (`reference.py`: scipy with events and the
+drag-free closed form). No test asserts on wall-clock time.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import PAPER_Y0
+from reference import BallParams, closed_form_reference, parabola
+
+from jaxunilat import _bench, _bench_goals, _bench_peers as peers
+from jaxunilat._cli import main
+
+TS = np.linspace(0.0, 2.0, 2001)
+
+
+def test_bench_reference_agrees_with_the_test_references(ref_ex2):
+    ours = peers.reference(peers.Params(), PAPER_Y0, TS)
+    assert np.max(np.abs(ours.x - ref_ex2(TS)[0])) <= 1e-10
+    np.testing.assert_allclose(ours.entries[:5], ref_ex2.impact_times()[1:6], rtol=0, atol=1e-12)
+    # Drag-free: the bench's closed form and its reference against the suite's closed form.
+    cf_tests = closed_form_reference(BallParams.table1(2, drag=None), PAPER_Y0, 2.0)(TS)[0]
+    cf_ours = peers.closed_form_drag_free(peers.Params(drag=None), PAPER_Y0, TS)
+    assert np.max(np.abs(cf_ours.x - cf_tests)) <= 1e-12
+    assert np.max(np.abs(peers.reference(peers.Params(drag=None), PAPER_Y0, TS).x - cf_tests)) <= 1e-10
+
+
+def test_numpy_rk4_peer_matches_the_parabola():
+    # Drag-free free flight from mid-air (no contact in 0.2 s): RK4 is exact for a parabola.
+    p = peers.Params(drag=None)
+    ts = np.linspace(0.0, 0.2, 201)
+    run = peers.numpy_rk4(p, (0.0, 1.0), ts, 1e-4)
+    np.testing.assert_allclose(run.x, parabola(0.0, 1.0, 9.81, ts)[0], rtol=0, atol=1e-13)
+    with pytest.raises(ValueError, match="must divide"):
+        peers.numpy_rk4(p, (0.0, 1.0), ts, 3e-4)
+
+
+def test_scipy_peers_converge_to_the_reference(ref_ex2):
+    p = peers.Params()
+    x_ref = ref_ex2(TS)[0]
+    loose = peers.solve_events(p, PAPER_Y0, TS, method="DOP853", rtol=1e-6, atol=1e-6)
+    tight = peers.solve_events(p, PAPER_Y0, TS, method="DOP853", rtol=1e-11, atol=1e-11)
+    e_loose, e_tight = (np.max(np.abs(r.x - x_ref)) for r in (loose, tight))
+    assert e_tight <= 1e-8 and e_tight < e_loose / 100
+    plain = peers.solve_no_events(p, PAPER_Y0, TS, method="LSODA", rtol=1e-8, atol=1e-8)
+    assert np.max(np.abs(plain.x - x_ref)) <= 1e-4
+
+
+def test_count_equations_counts_nested_jaxprs():
+    flat = jax.make_jaxpr(lambda x: jnp.sin(x) + 1.0)(1.0)
+    assert _bench.count_equations(flat) == 2
+    loop = jax.make_jaxpr(lambda x: jax.lax.fori_loop(0, 3, lambda i, y: jnp.sin(y) * 2.0, x))(1.0)
+    assert _bench.count_equations(loop) > len(loop.jaxpr.eqns) + 1
+
+
+def _row(method, error, wall, peer):
+    return {"method": method, "setting": "s", "error": error, "wall_s": wall, "peer": peer}
+
+
+def test_ratio_goal_takes_the_fastest_run_within_the_error_bound():
+    rows = [
+        _row("mine", 5e-10, 0.004, False),
+        _row("mine", 5e-8, 0.001, False),  # faster but not accurate enough
+        _row("scipy DOP853 + events", 8e-10, 0.050, True),
+        _row("scipy LSODA + events", 9e-10, 0.040, True),
+        _row("scipy RK45 + events", 2e-9, 0.010, True),  # fastest peer, not accurate enough
+    ]
+    goal = _bench_goals._ratio_goal("P1", rows, 1e-9)
+    assert goal["value"] == pytest.approx(0.004 / 0.040)
+    assert goal["vs_dop853_events"] == pytest.approx(0.004 / 0.050)
+    assert goal["met"] is False  # 0.1 > 1/20
+    assert _bench_goals._ratio_goal("P1", rows[1:2] + rows[2:], 1e-9)["value"] is None
+
+
+def test_bench_without_scipy_fails_with_one_line(monkeypatch, tmp_path, capsys):
+    monkeypatch.setitem(__import__("sys").modules, "scipy", None)  # `import scipy` raises ImportError
+    code = main(["bench", "--quick", "--out", str(tmp_path / "b")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert len(err.splitlines()) == 1
+    assert 'pip install "jaxunilat[bench]"' in err
+    assert not (tmp_path / "b").exists()
+
+
+@pytest.mark.slow
+def test_bench_tiny_end_to_end(tmp_path, capsys):
+    out = tmp_path / "bench"
+    assert main(["bench", "--size", "tiny", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    for key in ("P1", "P2", "P3", "P4", "P5"):
+        assert f"\n{key} " in printed
+    for name in ("work_precision.png", "throughput.png"):
+        assert (out / name).stat().st_size > 10_000
+    result = json.loads((out / "bench.json").read_text())
+
+    # Schema.
+    assert {"machine", "goals", "work_precision", "throughput"} <= set(result)
+    for key in ("P1", "P2", "P3", "P4", "P5"):
+        goal = result["goals"][key]
+        assert {"value", "target", "met", "unit"} <= set(goal)
+        assert isinstance(goal["met"], bool)
+    for row in result["work_precision"]:
+        assert {"method", "setting", "error", "wall_s", "compile_s", "peer"} <= set(row)
+    for row in result["throughput"]:
+        assert {"method", "n", "traj_per_s", "peak_mem_mb"} <= set(row)
+    methods = {r["method"] for r in result["work_precision"]}
+    assert {"scipy DOP853 + events", "NumPy RK4 loop", "event (tsit5)", "rk4, exact H"} <= methods
+
+    # The figures it reports are right, against independent checks.
+    assert result["reference_check"]["max_dx_m"] <= 1e-10  # reference vs drag-free closed form
+    rows = {(r["method"], r["setting"]): r for r in result["work_precision"]}
+    # RK4 with the exact Heaviside at dt = 1e-4: the same error for the JAX and the NumPy loop.
+    assert rows[("rk4, exact H", "dt 0.0001")]["error"] == pytest.approx(
+        rows[("NumPy RK4 loop", "dt 0.0001")]["error"], rel=1e-6
+    )
+    assert rows[("event (tsit5)", "tol 1e-10")]["error"] <= 1e-8
+    assert rows[("scipy DOP853 + events", "tol 1e-12")]["error"] <= 1e-9
+    assert result["throughput_checks"]["max_error_m"] <= 1e-8
+    assert result["no_retrace"]["ok"] is True
+    scenes = {r["scene"]: r for r in result["static_structure"]}
+    assert scenes["drag None"]["equations"] < scenes["drag = 0"]["equations"]
+    assert scenes["drag None"]["steps"] == scenes["drag = 0"]["steps"]  # same physics
+    # The tiny size leaves out the reverse-mode gradient (its compile is the slowest part;
+    # tests/test_event_mode.py checks event-mode gradients against FD of the reference) and
+    # the 2-device subprocess (tests/test_sweep.py runs it).
+    assert result["gradient"]["losses"] == [] and result["goals"]["P4"]["value"] is None
+    assert result["scale_out"]["rows"] == []
+    # P1 recomputed from the rows.
+    ok = [r for r in result["work_precision"] if r["error"] is not None and r["error"] <= 1e-9]
+    mine = min(r["wall_s"] for r in ok if not r["peer"])
+    best_peer = min(r["wall_s"] for r in ok if r["peer"])
+    assert math.isclose(result["goals"]["P1"]["value"], mine / best_peer, rel_tol=1e-12)
+    assert result["goals"]["P3"]["ratio_vs_scipy_loop"] > 0
+    assert "identification" in result
