@@ -7,6 +7,7 @@ from collections import Counter
 
 import diffrax as dfx
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
@@ -226,6 +227,14 @@ def simulate(
     """
     if not isinstance(model, AbstractModel):
         raise ValueError(f"model = {model!r} is not a jaxunilat model (e.g. Ball.table1(2))")
+    if not jax.config.jax_enable_x64:
+        raise ValueError(
+            "precision = float32 is not supported (jax_enable_x64 is off); valid: float64. In float32 "
+            "the step at a contact's kink must shrink below the time resolution (1.2e-7*t, t + dt == t), "
+            "so Tsit5 stalls at the first contacts (t ~ 0.1 s), and penetrations below 1.2e-7*|x| are "
+            "lost; call jax.config.update('jax_enable_x64', True). float32 input arrays are fine: "
+            "simulate casts them to float64."
+        )
     outputs = tuple(outputs)
     if not outputs:
         raise ValueError("outputs = () is empty; request at least one of " + ", ".join(model.output_names))

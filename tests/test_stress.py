@@ -1,0 +1,89 @@
+"""The numerical stress suite (issue 4): every run is accurate to its contract or a clear error.
+
+`pytest -m stress` runs all configurations from `stress_configs.make_configs()` (500 by
+default, `JAXUNILAT_STRESS_N` to change); the default run checks a quick subset that
+shares one compiled structure per mode. Both write the summary table (configurations,
+passes, clear errors, silent failures) to `JAXUNILAT_STRESS_TABLE` if set, else under
+pytest's tmp_path, and print it. The accuracy contract is in `stress_configs`'s docstring
+and in the README's "Reliability and limits".
+"""
+
+import json
+import math
+import os
+
+import pytest
+from stress_configs import MASS, MODES, make_configs, run_all, summary_table
+
+
+def _write(outcomes, tmp_path, name):
+    table = summary_table(outcomes)
+    path = os.environ.get("JAXUNILAT_STRESS_TABLE") or str(tmp_path / name)
+    with open(path, "w") as fh:
+        fh.write(table + "\n")
+    rows = [
+        dict(
+            index=o.config.index,
+            mode=o.config.mode,
+            family=o.config.family,
+            kappa=o.config.kappa,
+            k_r=o.config.k_r,
+            drag=o.config.drag,
+            two_sided=o.config.upper is not None,
+            t1=o.config.t1,
+            kind=o.kind,
+            error=o.error,
+            bound=o.bound,
+            detail=o.detail,
+            seconds=o.seconds,
+        )
+        for o in outcomes
+    ]
+    with open(os.path.splitext(path)[0] + ".json", "w") as fh:
+        json.dump(rows, fh, indent=1)
+    print(f"\nstress summary ({path}):\n{table}")
+    return table
+
+
+def _silent(outcomes):
+    return [
+        f"#{o.config.index} {o.config.mode} {o.config.family} kappa={o.config.kappa:.3g} t1={o.config.t1:.3g}: "
+        f"err {o.error:.3g} > bound {o.bound:.3g} ({o.detail})"
+        for o in outcomes
+        if o.kind == "silent"
+    ]
+
+
+def _quick_configs():
+    """Two-sided walls with drag, κ ≤ 3e5 N/m, t1 ≤ 1 s, ζ ≤ 0.3, no resting ball: two compiles
+    (event, tsit5) and references that take well under a second each."""
+    picked, per_mode = [], dict.fromkeys(MODES, 0)
+    for c in make_configs(4000):  # the full suite's 500 first, then more from the same seed
+        zeta = c.k_r / (2 * math.sqrt(c.kappa * MASS))
+        sticky = zeta > 0.3 or c.family == "rest"  # a ball that settles: slow references
+        if c.upper is None or c.drag is None or c.t1 > 1.0 or c.kappa > 3e5 or sticky:
+            continue
+        if c.mode not in ("event", "tsit5", "float32-inputs", "float32") or per_mode[c.mode] >= 4:
+            continue
+        per_mode[c.mode] += 1
+        picked.append(c)
+    return picked
+
+
+def test_stress_quick_subset(tmp_path):
+    configs = _quick_configs()
+    assert len(configs) >= 12
+    outcomes = run_all(configs)
+    _write(outcomes, tmp_path, "stress_quick.md")
+    assert not _silent(outcomes), "\n".join(_silent(outcomes))
+    # The subset must exercise the contract, not only clear errors.
+    assert sum(o.kind == "pass" for o in outcomes) >= len(configs) // 2
+    assert any(o.kind == "clear" and o.config.mode == "float32" for o in outcomes)
+
+
+@pytest.mark.stress
+def test_stress_full(tmp_path, request):
+    configs = make_configs(int(os.environ.get("JAXUNILAT_STRESS_N", "500")))
+    outcomes = run_all(configs)
+    _write(outcomes, tmp_path, "stress_full.md")
+    assert not _silent(outcomes), "\n".join(_silent(outcomes))
