@@ -48,7 +48,7 @@ def _run_identify(args) -> int:
     import json
 
     from jaxunilat._cli import EXIT_OK, RunError
-    from jaxunilat._io import check_output_path
+    from jaxunilat._io import check_output_paths
 
     from ._data import load_dataset
     from ._fit import fit
@@ -60,15 +60,7 @@ def _run_identify(args) -> int:
             raise ValueError(f"--fit {name!r} is not a nuisance parameter; valid: {', '.join(NUISANCE)}")
     if args.starts < 1:
         raise ValueError(f"--starts {args.starts} is out of range; valid range is integers >= 1")
-    for path in (args.json, args.plot):
-        if path is not None:
-            check_output_path(path)
-    if (
-        args.json is not None
-        and args.plot is not None
-        and os.path.abspath(args.json) == os.path.abspath(args.plot)
-    ):
-        raise ValueError(f"--json and --plot name the same file {args.json!r}")
+    check_output_paths(("--json", args.json), ("--plot", args.plot))
     data = load_dataset(args.data if args.data is not None else default_data_path())
     result = fit(
         data,

@@ -277,7 +277,6 @@ def fit(
     horizon = None
     if data.observe == "impacts":
         fall = first_impact_time(data.x0, data.v0, gravity) if data.scene == "drop" else 0.0
-        values.setdefault("offset", 0.0)
         if "offset" in nuisance and "offset" not in initial:
             values["offset"] = float(data.t[0]) - fall
         # Just past the last observed impact (a longer run only adds ever shorter bounces).
@@ -395,7 +394,8 @@ def fit(
         evaluator.prior = False
         r_data, jac_data, _ = evaluator(z)
         cov_tc, _ = covariance(jac_data, r_data, sigma_known=sigma_known)
-        use_prior = _sd_log_contact_time(cov_tc, z, mass) >= 0.1
+        contact_time = summarize(z, cov_tc, free, mass)[1]["contact_time"]
+        use_prior = not contact_time["stderr"] < 0.1 * contact_time["value"]  # sd(log t_c) < 0.1
         evaluator.prior = use_prior
     z, r, jac, cost, it, converged, why = _levenberg_marquardt(
         evaluator, z, free, _window_weights(problem, 1.0, use_prior), lo, hi, max_iterations=max_iterations
@@ -446,17 +446,6 @@ def fit(
         simulations=evaluator.calls,
         wall_s=time.perf_counter() - began,
     )
-
-
-def _sd_log_contact_time(cov, z, mass) -> float:
-    """sd of log t_c from the free entries' covariance (inf when not finite)."""
-    if not np.all(np.isfinite(cov[:2, :2])):
-        return math.inf
-    kappa, k_r = math.exp(z[0]), math.exp(z[1])
-    omega2 = kappa / mass - (k_r / (2 * mass)) ** 2
-    # d log t_c = −½ d log ω_d²; ω_d² = κ/m − k_r²/(4m²).
-    g = np.array([-0.5 * (kappa / mass) / omega2, 0.5 * 2 * (k_r / (2 * mass)) ** 2 / omega2])
-    return math.sqrt(max(float(g @ cov[:2, :2] @ g), 0.0))
 
 
 def _profile_kappa(evaluator, z_hat, free, lo, hi, cov, s2, max_iterations, cost_hat, points: int = 13):

@@ -87,15 +87,6 @@ class FitResult:
         """The fitted `jaxunilat.Ball` (exact Heaviside) for this data set's scene."""
         return self.problem.ball(jnp.asarray(self.z))
 
-    def simulate(self, t1: float | None = None, samples: int = 2001):
-        """The fitted model's run from the data's initial state (event mode), for plots."""
-        t_end = float(self.problem.t_obs[-1]) if self.data.observe == "trace" else float(self.problem.horizon)
-        t1 = t_end if t1 is None else t1
-        y0 = [self.z[3], self.z[4]]
-        return ju.simulate(
-            self.ball(), y0, t1, solver="event", rtol=1e-10, atol=1e-10, samples=samples, max_steps=16384
-        )
-
     def to_json_dict(self) -> dict:
         """The JSON document of `jaxunilat identify --json` (schema in the README)."""
         k = self.kappa_k_r_correlation()

@@ -148,18 +148,11 @@ def _build_ball(args):
 def _check_outputs(args) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    from ._io import check_output_path
+    from ._io import check_output_paths
 
     if args.events is not None and args.solver != "event":
         raise UsageError(f"--events needs --solver event (got --solver {args.solver})")
-    flags = (("--out", args.out), ("--plot", args.plot), ("--events", args.events))
-    named = [(flag, path) for flag, path in flags if path is not None]
-    for _, path in named:
-        check_output_path(path)
-    for i, (flag_a, path_a) in enumerate(named):
-        for flag_b, path_b in named[i + 1 :]:
-            if os.path.abspath(path_a) == os.path.abspath(path_b):
-                raise ValueError(f"{flag_a} and {flag_b} name the same file {path_a!r}")
+    check_output_paths(("--out", args.out), ("--plot", args.plot), ("--events", args.events))
     if args.plot is not None:
         suffix = os.path.splitext(args.plot)[1].lstrip(".").lower()
         if suffix and suffix not in FigureCanvasAgg.get_supported_filetypes():

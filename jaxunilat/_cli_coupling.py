@@ -73,19 +73,10 @@ def _build_coupling(example, params, reading, h):
     return model
 
 
-def _check_paths(*named) -> None:
-    from ._io import check_output_path
-
-    named = [(flag, path) for flag, path in named if path is not None]
-    for _, path in named:
-        check_output_path(path)
-    if len(named) == 2 and os.path.abspath(named[0][1]) == os.path.abspath(named[1][1]):
-        raise ValueError(f"{named[0][0]} and {named[1][0]} name the same file {named[0][1]!r}")
-
-
 def _run_simulate_coupling(args) -> int:
     import numpy as np
 
+    from ._io import check_output_paths
     from ._simulate import Status, simulate
     from ._validate import check_range
 
@@ -95,7 +86,7 @@ def _run_simulate_coupling(args) -> int:
     if not isinstance(args.samples, int) or args.samples < 2:
         raise ValueError(f"samples = {args.samples!r} is out of range; valid range is integers >= 2")
     model = _build_coupling(args.example, args.params, args.reading, args.h)
-    _check_paths(("--out", args.out), ("--plot", args.plot))
+    check_output_paths(("--out", args.out), ("--plot", args.plot))
     if args.solver == "rk4":
         check_range("dt", args.dt, lo=0.0, lo_open=True, unit="s")
         # Classic RK4 is stable for an undamped oscillator while ω·dt < 2.78 (ω_c: contact frequency).

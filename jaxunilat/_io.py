@@ -32,6 +32,18 @@ def check_output_path(path: str | os.PathLike, *, inputs: Iterable[str | os.Path
                 raise ValueError(f"output path {path!r} is an input file; refusing to overwrite it")
 
 
+def check_output_paths(*named: tuple[str, str | os.PathLike | None]) -> None:
+    """`check_output_path` for each `(flag, path)` given (None: not asked for), and no two
+    flags naming the same file."""
+    named = [(flag, os.fspath(path)) for flag, path in named if path is not None]
+    for _, path in named:
+        check_output_path(path)
+    for i, (flag_a, path_a) in enumerate(named):
+        for flag_b, path_b in named[i + 1 :]:
+            if os.path.abspath(path_a) == os.path.abspath(path_b):
+                raise ValueError(f"{flag_a} and {flag_b} name the same file {path_a!r}")
+
+
 def write_csv(
     path: str | os.PathLike,
     header: Sequence[str],

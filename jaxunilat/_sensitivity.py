@@ -240,15 +240,12 @@ def coupling_sensitivity(
     growth = float(np.linalg.norm(jac_state))
     fd = None
     if check:
-        fd = np.zeros_like(table)
-        for j in range(len(COUPLING_PARAMETERS)):
-            plus = coupling_features(
-                _scaled_coupling(model, s0.at[j].set(fd_step)), t1, samples=samples, **settings
-            )
-            minus = coupling_features(
-                _scaled_coupling(model, s0.at[j].set(-fd_step)), t1, samples=samples, **settings
-            )
-            fd[:, j] = (plus - minus) / (2 * fd_step) / values
+        fd = _central_differences(
+            lambda s: coupling_features(_scaled_coupling(model, s), t1, samples=samples, **settings),
+            s0,
+            fd_step,
+            values,
+        )
     return SensitivityResult(
         model=desc + f", h = {float(h):.4g} N*s/rad",
         outputs=COUPLING_OUTPUTS,
@@ -369,11 +366,7 @@ def ball_sensitivity(
     growth = float(np.linalg.norm(jac_state))
     fd = None
     if check:
-        fd = np.zeros_like(table)
-        for j in range(4):
-            step = np.eye(4)[j] * fd_step
-            plus, minus = np.asarray(f(s0 + step)[0]), np.asarray(f(s0 - step)[0])
-            fd[:, j] = (plus - minus) / (2 * fd_step) / values
+        fd = _central_differences(lambda s: f(s)[0], s0, fd_step, values)
     outputs = tuple(f"apex_{i + 1}" for i in range(n)) + tuple(f"impact_{i + 1}" for i in range(n))
     return SensitivityResult(
         model=f"ball, Table 1 example {example}, t1 = {t1:g} s",
@@ -386,6 +379,17 @@ def ball_sensitivity(
         growth=growth,
         fd=fd,
     )
+
+
+def _central_differences(features, s0, fd_step, values) -> np.ndarray:
+    """The finite-difference check of a sensitivity table: central differences of
+    `features(s)` in each log-scale entry of s, divided by the outputs' values."""
+    fd = np.zeros((len(values), len(s0)))
+    for j in range(len(s0)):
+        step = np.eye(len(s0))[j] * fd_step
+        plus, minus = np.asarray(features(s0 + step)), np.asarray(features(s0 - step))
+        fd[:, j] = (plus - minus) / (2 * fd_step) / values
+    return fd
 
 
 def format_table(result: SensitivityResult) -> str:
