@@ -36,6 +36,7 @@ from ._contact import (  # noqa: E402
 from ._coupling import TABLE2 as TABLE2, Coupling as Coupling  # noqa: E402
 from ._coupling_impacts import IMPACT_COLUMNS as IMPACT_COLUMNS, impact_table as impact_table  # noqa: E402
 from ._event import EventRecord as EventRecord  # noqa: E402
+from ._gradient_growth import GradientGrowth as GradientGrowth, gradient_growth as gradient_growth  # noqa: E402
 from ._heaviside import (  # noqa: E402
     AbstractHeaviside as AbstractHeaviside,
     Exact as Exact,

@@ -143,11 +143,18 @@ class Ball(AbstractModel):
             force = force + f
         return force
 
-    def acceleration(self, x: Array, v: Array, mask: Array | None = None) -> Array:
-        """ẍ, m/s² [K90 Eq. 3.1]."""
+    def acceleration(
+        self, x: Array, v: Array, mask: Array | None = None, direction: Array | None = None
+    ) -> Array:
+        """ẍ, m/s² [K90 Eq. 3.1].
+
+        With `direction` (±1, the sign of v in an event-mode piece) the drag's |v|·v is
+        written direction·v², its smooth continuation through v = 0.
+        """
         a = self.contact_force(x, v, mask) / self.mass - self.gravity
         if self.drag is not None:
-            a = a - self.drag**2 * self.gravity * jnp.abs(v) * v
+            speed_v = jnp.abs(v) * v if direction is None else direction * v * v
+            a = a - self.drag**2 * self.gravity * speed_v
         return a
 
     def vector_field(self, t, y, args=None):
@@ -181,10 +188,18 @@ class Ball(AbstractModel):
             g.append(x - self.upper)
         return jnp.stack(g)
 
-    def region_vector_field(self, t, y, mask):
-        """dy/dt of the exact model with the contacts given by `mask` held fixed."""
+    def region_vector_field(self, t, y, mask, direction=None):
+        """dy/dt of the exact model with the contacts given by `mask` held fixed, and
+        (with `direction`, ±1) the drag's sign held fixed: a smooth right-hand side."""
         x, v = y[0], y[1]
-        return jnp.stack([v, self.acceleration(x, v, mask)])
+        return jnp.stack([v, self.acceleration(x, v, mask, direction)])
+
+    @property
+    def observable_kink(self) -> bool:
+        """Whether the right-hand side has a kink where the observable v changes sign
+        (static): the drag's |v|·v. The event mode then ends a piece at every apex and
+        deepest point, so that each piece is smooth."""
+        return self.drag is not None
 
     def observable(self, y: Array) -> Array:
         """The quantity whose roots are apexes (in flight) and deepest points (in contact): v."""

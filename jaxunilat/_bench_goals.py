@@ -17,7 +17,7 @@ GOALS = {
 }
 P1_ERROR, P2_ERROR, P3_ERROR = 1e-9, 1e-6, 1e-8
 #: A step buffer that holds example 2 over [0, 2] s down to tol 1e-12 (1591 steps).
-SMALL_BUFFER = 2048
+SMALL_BUFFER = 1024
 
 
 def _best(rows, peer: bool, max_error: float):
@@ -106,12 +106,12 @@ def notes(result: dict, out: dict) -> dict:
         cost = "the event mode's per-step cost dominates"
     wp = result["work_precision"]
     buffer = ""
-    for tol in ("1e-06", "1e-10"):
-        big = [r for r in wp if r["method"] == "event (tsit5)" and r["setting"] == f"tol {tol}"]
+    for tol in ("1e-08", "1e-10"):
+        big = [r for r in wp if r["method"] == "event (dopri8)" and r["setting"] == f"tol {tol}"]
         small = [
             r
             for r in wp
-            if r["method"].startswith("event (tsit5), max_steps") and r["setting"] == f"tol {tol}"
+            if r["method"].startswith("event (dopri8), max_steps") and r["setting"] == f"tol {tol}"
         ]
         if big and small:
             buffer += (
@@ -135,7 +135,7 @@ def notes(result: dict, out: dict) -> dict:
         solo = [
             r
             for r in result["work_precision"]
-            if r["method"] == "event (tsit5)" and r["setting"] == "tol 1e-10"
+            if r["method"] == "event (dopri8)" and r["setting"] == "tol 1e-10"
         ]
         batched = ""
         if one and solo:

@@ -320,8 +320,9 @@ class Coupling(AbstractModel):
         dx, de = self.delta_xi, self.delta_eta
         return jnp.stack([-dx - y[0], y[0] - dx, -de - y[2], y[2] - de])
 
-    def region_vector_field(self, t, y, mask):
-        """dy/dt of the exact model with the contacts given by `mask` held fixed."""
+    def region_vector_field(self, t, y, mask, direction=None):
+        """dy/dt of the exact model with the contacts given by `mask` held fixed
+        (`direction` is unused: the right-hand side has no kink inside a region)."""
         return self._rhs(t, y, mask)
 
     def observable(self, y: Array) -> Array:

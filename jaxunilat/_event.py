@@ -33,6 +33,7 @@ import equinox as eqx
 import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array
 
 #: Event kinds in `EventRecord.kind`.
@@ -100,8 +101,11 @@ def _interp(solver_cls, t0, t1, dense):
     return solver_cls.interpolation_cls(t0=t0, t1=t1, **dense)
 
 
-def _locate(f, a, b):
+def _locate(f, a, b, positive_left=None):
     """A root of f in [a, b], given that f changes sign on (a, b].
+
+    `positive_left` (optional) is the sign of f just right of a, where f(a) itself may
+    be a rounding-level zero (a piece that starts at a root).
 
     Newton's method safeguarded by bisection, on a bracket that only shrinks, under
     stop_gradient: it stops improving at machine precision instead of failing a
@@ -109,7 +113,8 @@ def _locate(f, a, b):
     derivative is −(∂f/∂θ)/ḟ: the implicit-function gradient of the root.
     """
     a, b = jax.lax.stop_gradient(a), jax.lax.stop_gradient(b)
-    positive_left = jax.lax.stop_gradient(f(a)) > 0
+    if positive_left is None:
+        positive_left = jax.lax.stop_gradient(f(a)) > 0
 
     def body(_, state):
         lo, hi, x = state
@@ -129,6 +134,66 @@ def _locate(f, a, b):
     return root - (step - jax.lax.stop_gradient(step))
 
 
+def _refine(state_at, rate, value_of, t_root, y_root, radius):
+    """Polish an event time on the integrator's own step, differentiably.
+
+    `state_at(t)` is the state one step after the piece's start (the pair's step of
+    length t − t_start), `rate(t, y)` its time derivative and `value_of(y)` the event
+    function. One Newton iteration from the dense-output root `t_root` under
+    stop_gradient (the slope ∇g·ẏ needs no derivative of the step), kept only within
+    `radius` of t_root (Newton must polish this root, not jump to another one: a piece
+    starts at a root); then the state there, with one Newton update whose value is
+    ~0 and whose derivative is the implicit-function derivative −(∂g/∂θ)/ġ of the
+    event time, carried into the state as ẏ·dt*.
+
+    **Returns:** `(t*, y(t*))`.
+    """
+
+    def slope_at(tt, z):
+        return jax.jvp(value_of, (z,), (rate(tt, z),))
+
+    t_root = jax.lax.stop_gradient(t_root)
+    z = jax.lax.stop_gradient(state_at(t_root))
+    value, slope = jax.lax.stop_gradient(slope_at(t_root, z))
+    tt = t_root - jnp.where(slope == 0, 0.0, value / jnp.where(slope == 0, 1.0, slope))
+    polished = jnp.abs(tt - t_root) <= radius
+    tt = jnp.where(polished, tt, t_root)
+    # Not polished (a flat event function, ġ ≈ 0: a graze): keep the dense-output root
+    # and its state, which are consistent with each other.
+    z = jnp.where(polished, state_at(tt), y_root)
+    value, slope = slope_at(tt, jax.lax.stop_gradient(z))
+    value = value_of(z)
+    slope = jax.lax.stop_gradient(slope)
+    step = jnp.where(slope == 0, 0.0, value / jnp.where(slope == 0, 1.0, slope))
+    delta = -(step - jax.lax.stop_gradient(step))  # numerically 0
+    return tt + delta, z + rate(tt, jax.lax.stop_gradient(z)) * delta
+
+
+def _packed_cond(pred, true_fn, false_fn, dtype):
+    """`lax.cond` whose branches return one packed array instead of a pytree.
+
+    XLA:CPU copies every output of a conditional into its own buffer on every call; a
+    single packed output makes the common (uneventful) branch one small copy.
+    """
+    leaves, treedef = jax.tree_util.tree_flatten(jax.eval_shape(false_fn))
+
+    def packed(fn):
+        return lambda: jnp.concatenate([jnp.ravel(x).astype(dtype) for x in jax.tree_util.tree_leaves(fn())])
+
+    flat = jax.lax.cond(pred, packed(true_fn), packed(false_fn))
+    out, start = [], 0
+    for leaf in leaves:
+        size = int(np.prod(leaf.shape))
+        part = flat[start : start + size].reshape(leaf.shape)
+        start += size
+        if leaf.dtype == jnp.bool_:
+            part = part != 0
+        elif jnp.issubdtype(leaf.dtype, jnp.integer):
+            part = part.astype(leaf.dtype)
+        out.append(part)
+    return jax.tree_util.tree_unflatten(treedef, out)
+
+
 def event_solve(model, y0, t0, t1, ts, settings, outputs):
     """Integrate `model` in event mode.
 
@@ -146,9 +211,24 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
     fractions = jnp.linspace(0.0, 1.0, settings.subgrid + 1)[1:]
     dtype = y0.dtype
 
+    kink = bool(getattr(model, "observable_kink", False))
+
+    def rhs(t, y, mask, direction):
+        if kink:
+            return model.region_vector_field(t, y, mask, direction)
+        return model.region_vector_field(t, y, mask)
+
     g0 = model.switches(y0)
     dg0 = jax.jvp(model.switches, (y0,), (model.region_vector_field(t0, y0, g0 > 0),))[1]
     mask0 = (g0 > 0) | ((g0 == 0) & (dg0 > 0))
+    # The sign of the observable in the first piece (where it starts at 0: the sign
+    # it takes next).
+    obs0 = model.observable(y0)
+    dobs0 = jax.jvp(model.observable, (y0,), (rhs(t0, y0, mask0, jnp.ones((), dtype)),))[1]
+    direction0 = jnp.where(obs0 != 0, jnp.sign(obs0), jnp.where(dobs0 != 0, jnp.sign(dobs0), 1.0)).astype(
+        dtype
+    )
+    f_init = rhs(t0, y0, mask0, direction0)
     span = t1 - t0
     dt0 = span * 1e-4 if settings.dt is None else settings.dt
     dtmax = span if settings.dtmax is None else settings.dtmax
@@ -173,7 +253,8 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         y=y0,
         mask=mask0,
         dt=jnp.asarray(dt0, dtype),
-        f0=model.region_vector_field(t0, y0, mask0),
+        f0=f_init,
+        direction=direction0,
         seen_extremum=jnp.array(False),
         peak=jnp.where(jnp.any(mask0), contact_force_abs(y0, mask0), 0.0),
         n_steps=jnp.array(0),
@@ -213,9 +294,8 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         h = jnp.minimum(jnp.minimum(c["dt"], dtmax), t1 - t)
         t_next = jnp.where(t1 - (t + h) < 1e-12 * jnp.abs(t1), t1, t + h)
         h = t_next - t
-        y1, y_err, k, f1 = _erk_step(
-            solver_cls, lambda s, z: model.region_vector_field(s, z, mask), t, h, y, c["f0"]
-        )
+        direction = c["direction"]
+        y1, y_err, k, f1 = _erk_step(solver_cls, lambda s, z: rhs(s, z, mask, direction), t, h, y, c["f0"])
         dense = dict(y0=y, y1=y1, k=k)
         scale = settings.atol + settings.rtol * jnp.maximum(jnp.abs(y), jnp.abs(y1))
         err = jnp.sqrt(jnp.mean((y_err / scale) ** 2))
@@ -231,7 +311,10 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         # Cheap tests on the sub-grid: a sign change of the observable (an extremum
         # inside the step) or a switching function on the wrong side (a crossing).
         obs_sub = jax.vmap(model.observable)(sub_y)
-        prev = jnp.concatenate([model.observable(y)[None], obs_sub[:-1]])
+        # With a kink the piece may start at a root of the observable (a rounding-level
+        # value of either sign): its sign in the piece is `direction`.
+        obs_start = direction if kink else model.observable(y)
+        prev = jnp.concatenate([obs_start[None], obs_sub[:-1]])
         flips = (jnp.sign(prev) != jnp.sign(obs_sub)) & (obs_sub != 0)
         has_ext = jnp.any(flips)
         g_sub = jax.vmap(model.switches)(sub_y)
@@ -245,6 +328,7 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
                 t_end=t_next,
                 y_end=y1,
                 mask=mask,
+                direction=direction,
                 f0=f1,
                 ext=(no, t_next, y1),
                 cross=(no, t_next, y1, no, jnp.array(0)),
@@ -255,9 +339,10 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
             # it is where a short excursion beyond a wall is deepest.
             j = jnp.argmax(flips)
             lo = jnp.where(j == 0, t, sub_t[jnp.maximum(j - 1, 0)])
+            sign_left = (jnp.where(j == 0, obs_start, obs_sub[jnp.maximum(j - 1, 0)]) > 0) if kink else None
             t_ext = jax.lax.cond(
                 has_ext,
-                lambda: _locate(lambda s: model.observable(interp.evaluate(s)), lo, sub_t[j]),
+                lambda: _locate(lambda s: model.observable(interp.evaluate(s)), lo, sub_t[j], sign_left),
                 lambda: t_next,
             )
             y_ext = interp.evaluate(t_ext)
@@ -287,18 +372,50 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
             y_star = jnp.where(crossing, interp.evaluate(t_star), y1)
             entering = ~mask[wall]
             new_mask = jnp.where(crossing, mask.at[wall].set(entering), mask)
+            # With a kink at the observable's root, the piece ends there (before any
+            # later crossing, which the next piece finds again) and the sign flips.
+            flip = (has_ext & (t_ext < t_star)) if kink else jnp.array(False)
+            crossing = crossing & ~flip
+            t_end = jnp.where(flip, t_ext, t_star)
+            y_end = jnp.where(flip, y_ext, y_star)
+            new_mask = jnp.where(flip, mask, new_mask)
+            new_direction = jnp.where(flip, -direction, direction)
+
+            # Refine the event time on the pair's own step (the dense output is less
+            # accurate than a step; Dopri8's much less): Newton on t ↦ g(step(t0 → t)),
+            # then the state from that step. An error made here would shift every
+            # later piece.
+            def at(tt):
+                return _erk_step(solver_cls, lambda s, z: rhs(s, z, mask, direction), t, tt - t, y, c["f0"])[
+                    0
+                ]
+
+            def event_value(z):
+                return jnp.where(flip, model.observable(z), model.switches(z)[wall])
+
+            t_ref, y_ref = _refine(
+                at, lambda s, z: rhs(s, z, mask, direction), event_value, t_end, y_end, 1e-3 * h
+            )
+            y_end = jnp.where(crossing | flip, y_ref, y1)
+            t_end = jnp.where(crossing | flip, t_ref, t_next)
             # The region changed: restart FSAL with the new right-hand side.
-            f_star = model.region_vector_field(t_star, y_star, new_mask)
+            f_end = rhs(t_end, y_end, new_mask, new_direction)
             return dict(
-                t_end=t_star,
-                y_end=y_star,
+                t_end=t_end,
+                y_end=y_end,
                 mask=new_mask,
-                f0=jnp.where(crossing, f_star, f1),
-                ext=(has_ext & (t_ext < t_star), t_ext, y_ext),
+                direction=new_direction,
+                f0=jnp.where(crossing | flip, f_end, f1),
+                # With a kink the extremum ends the piece: its refined time and state.
+                ext=(
+                    flip | (has_ext & (t_ext < t_star)),
+                    jnp.where(flip, t_end, t_ext),
+                    jnp.where(flip, y_end, y_ext),
+                ),
                 cross=(crossing, t_star, y_star, entering, wall),
             )
 
-        out = jax.lax.cond(eventful, eventful_step, plain)
+        out = _packed_cond(eventful, eventful_step, plain, dtype)
         t_end = out["t_end"]
 
         c = dict(c)
@@ -335,6 +452,8 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         c["y"] = jnp.where(accept, out["y_end"], y)
         c["mask"] = jnp.where(accept, out["mask"], mask)
         c["f0"] = jnp.where(accept, out["f0"], c["f0"])
+        c["direction"] = jnp.where(accept, out["direction"], direction)
+        # After a crossing: a step estimated for the new region.
         c["dt"] = jnp.where(event, jnp.minimum(dt_new, jax.lax.stop_gradient(h)), dt_new)
         return c
 

@@ -17,12 +17,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 
 import numpy as np
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 FREE, LOWER, UPPER = 0, -1, 1
+_HOLD = 2  # scipy_reference's internal "at rest from here on"
 
 # The paper's constants [K90 §5.1, Table 1] (SPEC §2.2).
 PAPER = dict(mass=2.37e-3, gravity=9.81, drag=0.122, lower=-0.4, upper=0.4)
@@ -62,6 +64,13 @@ class BallParams:
         elif region == UPPER:
             a += (-self.kappa * (x - self.upper) - self.kr * v) / self.mass
         return a
+
+    def contact_acceleration(self, u: float, v: float) -> float:
+        """ü in a contact with u = x − wall (u < 0 beyond the lower wall, > 0 beyond the
+        upper): both walls of [K90 Eq. 3.2] read −g − k²g|v|v − (κu + k_r v)/m. Written in u,
+        not x, so that the spring force of a resting contact (u ≈ −mg/κ, tiny) is computed
+        to full precision instead of from the difference of two nearly equal positions."""
+        return -self.gravity - self.k2g * abs(v) * v - (self.kappa * u + self.kr * v) / self.mass
 
     def energy(self, x, v):
         """½mv² + mgx + ½κ·pen² (J), pen the depth beyond either wall."""
@@ -114,6 +123,10 @@ class Reference:
         return np.array([c.t_in for c in self.contacts if wall is None or c.wall == wall])
 
 
+class ReferenceTimeout(RuntimeError):
+    """The reference took longer than its `max_seconds` or more than its `max_segments` pieces."""
+
+
 def _initial_region(p: BallParams, x0: float, v0: float) -> int:
     if p.lower is not None and (x0 < p.lower or (x0 == p.lower and v0 < 0)):
         return LOWER
@@ -136,6 +149,8 @@ def scipy_reference(
     atol: float = 1e-15,
     max_step_free: float = 1e-3,
     max_segments: int = 2000,
+    max_seconds: float = math.inf,
+    rest_amplitude: float = 1e-13,
 ) -> Reference:
     """DOP853 with event location at the walls and a per-region right-hand side.
 
@@ -144,45 +159,117 @@ def scipy_reference(
     direction (never from the sign of x − wall, which is zero there). Free flight
     caps the step (`max_step_free`) so that a step cannot jump over a short excursion
     beyond the upper wall (a drag-free parabola has a zero error estimate, SPEC §3).
+
+    A piece that starts on a wall watches that wall with (x − wall)/(t − t_start)
+    (→ v at the start) instead of x − wall: the root at the start itself is divided
+    out, so a short flight or contact that begins on the wall is located however
+    short it is (x − wall, zero at the start, made the root finder return the start
+    and the solver chatter between two zero-length pieces).
+
+    A lower contact under gravity that cannot end is detected and not chattered
+    through: with w = x − (wall − mg/κ) the offset from the static deflection and
+    ω² = κ/m, E = ½v² + ½ω²w² never increases in the contact (damping and drag only
+    remove energy), so once √(2E)/ω < mg/κ the ball can never get back to the wall
+    (x − wall = w − mg/κ < 0). From there the contact is integrated without an exit
+    event until √(2E)/ω < `rest_amplitude` (m), and then held at the exact rest state
+    x = wall − mg/κ, v = 0 (an equilibrium with drag too), which is within
+    `rest_amplitude` of the true motion for the rest of the span.
+
+    `max_seconds` bounds the wall time: a slower reference raises `ReferenceTimeout`
+    (a `RuntimeError`), as does one with more than `max_segments` pieces.
     """
+    deadline = time.perf_counter() + max_seconds
     x0, v0 = float(y0[0]), float(y0[1])
     region = _initial_region(p, x0, v0)
-    t, y = float(t0), np.array([x0, v0])
+    walls = {FREE: 0.0, LOWER: p.lower, UPPER: p.upper}
+    # y: (x, v) in flight, (u, v) with u = x − wall in a contact.
+    t, y = float(t0), np.array([x0 - walls[region], v0])
     segments, contacts = [], []
     open_contact = None
     if region != FREE:
         open_contact = (_wall_name(region), t, v0)
+    # The wall the current piece starts on (None: neither).
+    on_wall = x0 if x0 in (p.lower, p.upper) else None
+    omega2 = p.kappa / p.mass
+    sag = p.gravity / omega2 if p.gravity > 0 else 0.0  # static deflection mg/κ on the lower wall
+    resting = hold_now = False
+    calls = [0]
 
     def make_rhs(reg):
         def rhs(_t, yy):
-            return [yy[1], p.acceleration(reg, yy[0], yy[1])]
+            calls[0] += 1
+            if calls[0] % 2000 == 0 and time.perf_counter() > deadline:
+                raise ReferenceTimeout(f"scipy_reference: slower than {max_seconds} s")
+            if reg == FREE:
+                return [yy[1], p.acceleration(FREE, yy[0], yy[1])]
+            return [yy[1], p.contact_acceleration(yy[0], yy[1])]
 
         return rhs
 
-    def event(wall, direction):
-        def ev(_t, yy):
-            return yy[0] - wall
+    def event(wall, direction, t_start, local=False):
+        """x (or u) through `wall` (0 for u); divided by t − t_start if the piece starts there."""
+        if (local and on_wall is not None) or (not local and wall == on_wall):
+
+            def ev(tt, yy):
+                return yy[1] if tt <= t_start else (yy[0] - wall) / (tt - t_start)
+
+        else:
+
+            def ev(_t, yy):
+                return yy[0] - wall
 
         ev.terminal = True
         ev.direction = direction
         return ev
 
+    def amplitude2(yy):
+        """(√(2E)/ω)² about the lower wall's rest state."""
+        w = yy[0] + sag
+        return w * w + yy[1] * yy[1] / omega2
+
+    def below(level):
+        def ev(_t, yy):
+            return amplitude2(yy) - level * level
+
+        ev.terminal = True
+        ev.direction = -1.0
+        return ev
+
     while t < t1:
         if len(segments) >= max_segments:
-            raise RuntimeError(f"scipy_reference: more than {max_segments} segments (chattering?)")
+            raise ReferenceTimeout(f"scipy_reference: more than {max_segments} segments")
+        if time.perf_counter() > deadline:
+            raise ReferenceTimeout(f"scipy_reference: slower than {max_seconds} s")
+        if region == LOWER and sag > 0 and not resting and amplitude2(y) <= sag * sag:
+            resting = True
         if region == FREE:
             events, nxt = [], []
             if p.lower is not None:
-                events.append(event(p.lower, -1.0))  # x falls through the lower wall
+                events.append(event(p.lower, -1.0, t))  # x falls through the lower wall
                 nxt.append(LOWER)
             if p.upper is not None:
-                events.append(event(p.upper, +1.0))  # x rises through the upper wall
+                events.append(event(p.upper, +1.0, t))  # x rises through the upper wall
                 nxt.append(UPPER)
             max_step = max_step_free
+        elif region == LOWER and resting:
+            level = rest_amplitude * max(1.0, abs(p.lower))
+            if hold_now or amplitude2(y) <= level * level:
+                rest = (p.lower - sag, 0.0)  # exactly: contact_acceleration(−mg/κ, 0) = 0
+
+                def hold(ts, rest=rest):
+                    ts = np.asarray(ts, float)
+                    return np.full(ts.shape, rest[0]), np.zeros(ts.shape)
+
+                segments.append((t, float(t1), LOWER, hold))
+                break
+            events, nxt, max_step = [below(level)], [_HOLD], np.inf
         elif region == LOWER:
-            events, nxt, max_step = [event(p.lower, +1.0)], [FREE], np.inf
+            events, nxt, max_step = [event(0.0, +1.0, t, local=True)], [FREE], np.inf
+            if sag > 0:
+                events.append(below(sag))
+                nxt.append(LOWER)
         else:
-            events, nxt, max_step = [event(p.upper, -1.0)], [FREE], np.inf
+            events, nxt, max_step = [event(0.0, -1.0, t, local=True)], [FREE], np.inf
         sol = solve_ivp(
             make_rhs(region),
             (t, t1),
@@ -193,22 +280,33 @@ def scipy_reference(
             events=events,
             dense_output=True,
             max_step=max_step,
+            # In a contact, scipy's first-step guess sees only the small acceleration at the
+            # wall (u = 0) and tries a step far beyond the contact (overflowing the drag
+            # term before it is rejected): start at a tenth of 1/ω instead.
+            first_step=None if region == FREE else min(0.1 / math.sqrt(omega2), t1 - t),
         )
         if sol.status < 0:
             raise RuntimeError(f"scipy_reference: solve_ivp failed: {sol.message}")
         hit = [i for i, te in enumerate(sol.t_events) if len(te)]
         t_end = float(sol.t[-1])
-        segments.append((t, t_end, region, _dense_eval(sol.sol)))
+        segments.append((t, t_end, region, _dense_eval(sol.sol, walls[region])))
         if sol.status == 1 and hit:
             i = min(hit, key=lambda j: sol.t_events[j][0])
             t_ev, y_ev = float(sol.t_events[i][0]), np.array(sol.y_events[i][0], float)
             new = nxt[i]
-            if new == FREE:
+            if new in (region, _HOLD):  # the contact can no longer end / has come to rest
+                resting, hold_now = True, new == _HOLD
+                new, on_wall = LOWER, None
+            elif new == FREE:
                 wall, t_in, v_in = open_contact
                 contacts.append(Contact(wall, t_in, t_ev, v_in, float(y_ev[1])))
                 open_contact = None
+                on_wall = walls[region]
+                y_ev[0] = on_wall  # the event is u = 0: x = wall
             else:
                 open_contact = (_wall_name(new), t_ev, float(y_ev[1]))
+                on_wall = walls[new]
+                y_ev[0] = 0.0  # the event is x = wall: u = 0
             t, y, region = t_ev, y_ev, new
         else:
             t = t1
@@ -218,10 +316,10 @@ def scipy_reference(
     return Reference(segments, contacts)
 
 
-def _dense_eval(dense):
+def _dense_eval(dense, offset=0.0):
     def f(ts):
         out = dense(ts)
-        return out[0], out[1]
+        return offset + out[0], out[1]
 
     return f
 

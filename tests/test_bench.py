@@ -128,7 +128,12 @@ def test_bench_tiny_end_to_end(tmp_path, capsys):
     assert result["no_retrace"]["ok"] is True
     scenes = {r["scene"]: r for r in result["static_structure"]}
     assert scenes["drag None"]["equations"] < scenes["drag = 0"]["equations"]
-    assert scenes["drag None"]["steps"] == scenes["drag = 0"]["steps"]  # same physics
+    # Same physics: the same end state. (A drag term present with value 0 still makes the
+    # event mode end a piece at every apex and deepest point, its kink: a few more steps.)
+    assert scenes["drag None"]["x_end_m"] == pytest.approx(scenes["drag = 0"]["x_end_m"], abs=1e-8)
+    assert (
+        abs(scenes["drag None"]["steps"] - scenes["drag = 0"]["steps"]) <= 0.05 * scenes["drag None"]["steps"]
+    )
     # The tiny size leaves out the reverse-mode gradient (its compile is the slowest part;
     # tests/test_event_mode.py checks event-mode gradients against FD of the reference) and
     # the 2-device subprocess (tests/test_sweep.py runs it).
