@@ -161,9 +161,8 @@ def _refine(state_at, rate, value_of, t_root, y_root, radius):
     # Not polished (a flat event function, ġ ≈ 0: a graze): keep the dense-output root
     # and its state, which are consistent with each other.
     z = jnp.where(polished, state_at(tt), y_root)
-    value, slope = slope_at(tt, jax.lax.stop_gradient(z))
+    slope = jax.lax.stop_gradient(slope_at(tt, z)[1])
     value = value_of(z)
-    slope = jax.lax.stop_gradient(slope)
     step = jnp.where(slope == 0, 0.0, value / jnp.where(slope == 0, 1.0, slope))
     delta = -(step - jax.lax.stop_gradient(step))  # numerically 0
     return tt + delta, z + rate(tt, jax.lax.stop_gradient(z)) * delta
@@ -295,7 +294,12 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         t_next = jnp.where(t1 - (t + h) < 1e-12 * jnp.abs(t1), t1, t + h)
         h = t_next - t
         direction = c["direction"]
-        y1, y_err, k, f1 = _erk_step(solver_cls, lambda s, z: rhs(s, z, mask, direction), t, h, y, c["f0"])
+
+        def piece_rhs(s, z):
+            # The smooth right-hand side of this piece (its region and drag sign).
+            return rhs(s, z, mask, direction)
+
+        y1, y_err, k, f1 = _erk_step(solver_cls, piece_rhs, t, h, y, c["f0"])
         dense = dict(y0=y, y1=y1, k=k)
         scale = settings.atol + settings.rtol * jnp.maximum(jnp.abs(y), jnp.abs(y1))
         err = jnp.sqrt(jnp.mean((y_err / scale) ** 2))
@@ -386,16 +390,12 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
             # then the state from that step. An error made here would shift every
             # later piece.
             def at(tt):
-                return _erk_step(solver_cls, lambda s, z: rhs(s, z, mask, direction), t, tt - t, y, c["f0"])[
-                    0
-                ]
+                return _erk_step(solver_cls, piece_rhs, t, tt - t, y, c["f0"])[0]
 
             def event_value(z):
                 return jnp.where(flip, model.observable(z), model.switches(z)[wall])
 
-            t_ref, y_ref = _refine(
-                at, lambda s, z: rhs(s, z, mask, direction), event_value, t_end, y_end, 1e-3 * h
-            )
+            t_ref, y_ref = _refine(at, piece_rhs, event_value, t_end, y_end, 1e-3 * h)
             y_end = jnp.where(crossing | flip, y_ref, y1)
             t_end = jnp.where(crossing | flip, t_ref, t_next)
             # The region changed: restart FSAL with the new right-hand side.
@@ -453,7 +453,6 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         c["mask"] = jnp.where(accept, out["mask"], mask)
         c["f0"] = jnp.where(accept, out["f0"], c["f0"])
         c["direction"] = jnp.where(accept, out["direction"], direction)
-        # After a crossing: a step estimated for the new region.
         c["dt"] = jnp.where(event, jnp.minimum(dt_new, jax.lax.stop_gradient(h)), dt_new)
         return c
 

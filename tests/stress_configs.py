@@ -75,8 +75,9 @@ class Config:
         return (self.lower is None, self.upper is None, self.drag is None, self.mode)
 
     @property
-    def params(self) -> BallParams:
-        return BallParams(
+    def physical(self) -> dict:
+        """The physical parameters (SI), as keyword arguments of `BallParams` and `Ball`."""
+        return dict(
             kappa=self.kappa,
             k_r=self.k_r,
             mass=MASS,
@@ -85,6 +86,10 @@ class Config:
             lower=self.lower,
             upper=self.upper,
         )
+
+    @property
+    def params(self) -> BallParams:
+        return BallParams(**self.physical)
 
     @property
     def contact_time(self) -> float:
@@ -169,16 +174,7 @@ def _ball(c: Config, eps: float | None = None):
         heaviside = jaxunilat.Logistic(eps)
     elif c.mode == "softplus":
         heaviside = jaxunilat.Softplus(eps)
-    return jaxunilat.Ball(
-        kappa=c.kappa,
-        k_r=c.k_r,
-        mass=MASS,
-        gravity=GRAVITY,
-        drag=c.drag,
-        lower=c.lower,
-        upper=c.upper,
-        heaviside=heaviside,
-    )
+    return jaxunilat.Ball(**c.physical, heaviside=heaviside)
 
 
 def bound(c: Config, ref_x, ref_v, ts, n_contacts: int) -> float:
@@ -205,18 +201,7 @@ def _simulate(c: Config, eps: float | None):
         if c.mode == "float32-inputs":
             # float32 arrays in: simulate computes in float64 (inputs are cast up).
             ball = jaxunilat.Ball(
-                **{
-                    k: (None if v is None else np.float32(v))
-                    for k, v in dict(
-                        kappa=c.kappa,
-                        k_r=c.k_r,
-                        mass=MASS,
-                        gravity=GRAVITY,
-                        drag=c.drag,
-                        lower=c.lower,
-                        upper=c.upper,
-                    ).items()
-                }
+                **{k: (None if v is None else np.float32(v)) for k, v in c.physical.items()}
             )
             y0 = y0.astype(np.float32)
         return jaxunilat.simulate(
