@@ -44,7 +44,7 @@ from jaxunilat._validate import check_choice, check_range
 from ._initial import CONTACT_TIME_GUESS, CONTACT_TIME_PRIOR, first_impact_time, initial_restitution
 from ._problem import LOG_PARAMETERS, NUISANCE, PARAMETERS, Problem, evaluate_rows, make_problem, to_z
 from ._result import FitResult
-from ._uncertainty import Z95, covariance, summarize
+from ._uncertainty import Z95, covariance, goodness_of_fit, summarize
 
 METHODS = ("lm", "optax")
 _WINDOWS = (0.35, 0.65, 1.0)
@@ -414,6 +414,10 @@ def fit(
     parameters, derived, identifiable, corr, names = summarize(
         z, cov, free, mass, rel_halfwidth=rel_halfwidth
     )
+    goodness = goodness_of_fit(float(np.sum(r**2)), r.size, len(free), sigma_known=sigma_known)
+    if goodness["consistent"] is False:
+        # The intervals assume a fit consistent with the noise; this one is not.
+        identifiable = {name: False for name in identifiable}
     finite_cost = math.isfinite(best["cost"])
     converged = bool(best["converged"] and finite_cost and not at_bound)
     message = best["why"] if not at_bound else f"stopped at a bound: {', '.join(at_bound)}"
@@ -434,6 +438,7 @@ def fit(
         chi2=float(np.sum(r**2)),
         sigma=math.sqrt(s2) * sigma if not sigma_known else sigma,
         sigma_source="file" if sigma_known else "residuals",
+        goodness=goodness,
         converged=converged,
         message=message,
         iterations=int(best["iterations"]),

@@ -26,7 +26,11 @@ class FitResult:
     - `derived`: the same for `restitution` (e, Kelvin–Voigt, [K90 Eq. 3.1]) and
       `contact_time` (t_c = π/ω_d, s).
     - `identifiable`: `{kappa, k_r, restitution, contact_time}` → bool: a finite 95%
-      CI whose half-width is at most `rel_halfwidth` of the value.
+      CI whose half-width is at most `rel_halfwidth` of the value, and a fit that
+      passes the χ² test of `goodness` (all False when it fails).
+    - `goodness`: `{"reduced_chi2", "dof", "p_value", "consistent"}`, the χ² test of
+      the fit against the file's noise σ (p_value and consistent are None when σ was
+      estimated from the residuals).
     - `correlation`: the correlation matrix of the fitted entries of z (logs for
       κ, k_r, drag), in the order `free`.
     - `converged`, `message`, `iterations` (LM), `gradient_steps` (optax stage).
@@ -51,6 +55,7 @@ class FitResult:
     chi2: float
     sigma: float
     sigma_source: str
+    goodness: dict
     converged: bool
     message: str
     iterations: int
@@ -87,6 +92,20 @@ class FitResult:
         """The fitted `jaxunilat.Ball` (exact Heaviside) for this data set's scene."""
         return self.problem.ball(jnp.asarray(self.z))
 
+    def inconsistency_warning(self) -> str:
+        """Why the verdicts are all NO when the fit fails its χ² test, and what to try."""
+        g = self.goodness
+        hints = ["check the file's scene, x0, v0, drag and noise"]
+        if self.data.observe == "impacts" and "offset" not in self.free:
+            hints.insert(0, "acoustic impact times rarely know the release time: add --fit offset")
+        elif "x0" not in self.free or "v0" not in self.free:
+            hints.append("or fit the start with --fit x0,v0")
+        return (
+            f"WARNING: the model does not fit the data: reduced chi-square {g['reduced_chi2']:.4g} "
+            f"with the file's noise\n(p = {g['p_value']:.2g}), so the intervals above describe nothing "
+            f"and no quantity is declared identifiable.\nTo fix: " + "; ".join(hints) + "."
+        )
+
     def to_json_dict(self) -> dict:
         """The JSON document of `jaxunilat identify --json` (schema in the README)."""
         k = self.kappa_k_r_correlation()
@@ -122,6 +141,9 @@ class FitResult:
             "chi2": self.chi2,
             "sigma": self.sigma,
             "sigma_source": self.sigma_source,
+            "goodness_of_fit": {
+                k: _finite_or_none(v) if isinstance(v, float) else v for k, v in self.goodness.items()
+            },
             "message": self.message,
             "method": self.method,
             "iterations": self.iterations,
@@ -162,6 +184,14 @@ class FitResult:
         lines.append(f"    reduced chi-square = {self.chi2 / max(n - p, 1):.6g}")
         unit = "s" if d.observe == "impacts" else "m"
         lines.append(f"    noise sigma        = {self.sigma:.4g} {unit} ({self.sigma_source})")
+        g = self.goodness
+        if g["p_value"] is None:
+            lines.append("    fit vs noise       = not tested (sigma estimated from the residuals)")
+        else:
+            verdict = "consistent" if g["consistent"] else "INCONSISTENT"
+            lines.append(
+                f"    fit vs noise       = {verdict} (P(chi2_{g['dof']} >= chi-square) = {g['p_value']:.3g})"
+            )
         lines.append(f"    converged          = {self.converged} ({self.message})")
         lines.append(f"    wall time          = {self.wall_s:.2f} s (including JIT compilation)")
         lines.append("[[Variables]]")
@@ -179,6 +209,8 @@ class FitResult:
         lines.append(
             f"[[Identifiability]] (95% CI finite and half-width <= {self.rel_halfwidth:.0%} of the value)"
         )
+        if self.goodness["consistent"] is False:
+            lines.extend("    " + line for line in self.inconsistency_warning().splitlines())
         for name, label in (
             ("kappa", "kappa"),
             ("k_r", "k_r"),

@@ -15,11 +15,14 @@ boundary:
    of the model's observable (v for the ball: apexes and deepest points). Checking at
    the extremum catches a crossing that enters and leaves within one step, the free
    flight pitfall where a parabola's zero error estimate lets a step jump over a wall.
-3. The earliest crossing is located on the interpolant by bisection under
-   `stop_gradient` to machine precision, then one differentiable Newton update
-   t* ← t* − g(t*)/ġ(t*) gives the implicit-function gradient of the event time.
-4. The state at t* comes from the interpolant, the region flips, and the step
-   restarts there (FSAL is reset).
+3. The earliest crossing is located on the interpolant by safeguarded Newton under
+   `stop_gradient` to machine precision, polished by Newton on the pair's own step
+   (the dense output is less accurate than a step), then one differentiable Newton
+   update t* ← t* − g(t*)/ġ(t*) gives the implicit-function gradient of the event time.
+4. The state at t* comes from that step, the region flips, and the step restarts
+   there (FSAL is reset) with the last accepted step size of the previous visit to
+   the new kind of region. With the drag's kink (|v|·v), a piece also ends at every
+   root of v unless the kink's effect over the step is negligible.
 
 Every event (entry, exit, apex, deepest point) is recorded in a fixed-size buffer,
 and every accepted step's interpolant in another, from which outputs at the save
@@ -40,6 +43,10 @@ from jaxtyping import Array
 ENTRY, EXIT, EXTREMUM = 1, 2, 3
 
 _ITERATIONS = 12
+#: A kink whose effect over a step, |Δf|·h, is below this fraction of the error scale
+#: does not end a piece (see `event_solve`).
+_NEGLIGIBLE_KINK = 1e-3
+_REFINE_ITERATIONS = 2
 _REC = 3  # leading columns of a step record: t0, t1, t_end
 _EV = 4  # leading columns of an event record: t, kind, wall, peak force
 
@@ -139,10 +146,10 @@ def _refine(state_at, rate, value_of, t_root, y_root, radius):
 
     `state_at(t)` is the state one step after the piece's start (the pair's step of
     length t − t_start), `rate(t, y)` its time derivative and `value_of(y)` the event
-    function. One Newton iteration from the dense-output root `t_root` under
-    stop_gradient (the slope ∇g·ẏ needs no derivative of the step), kept only within
-    `radius` of t_root (Newton must polish this root, not jump to another one: a piece
-    starts at a root); then the state there, with one Newton update whose value is
+    function. Up to `_REFINE_ITERATIONS` Newton iterations from the dense-output root
+    `t_root` under stop_gradient (the slope ∇g·ẏ needs no derivative of the step), kept
+    only within `radius` of t_root (Newton must polish this root, not jump to another
+    one: a piece starts at a root); then the state there, with one Newton update whose value is
     ~0 and whose derivative is the implicit-function derivative −(∂g/∂θ)/ġ of the
     event time, carried into the state as ẏ·dt*.
 
@@ -153,11 +160,17 @@ def _refine(state_at, rate, value_of, t_root, y_root, radius):
         return jax.jvp(value_of, (z,), (rate(tt, z),))
 
     t_root = jax.lax.stop_gradient(t_root)
-    z = jax.lax.stop_gradient(state_at(t_root))
-    value, slope = jax.lax.stop_gradient(slope_at(t_root, z))
-    tt = t_root - jnp.where(slope == 0, 0.0, value / jnp.where(slope == 0, 1.0, slope))
-    polished = jnp.abs(tt - t_root) <= radius
-    tt = jnp.where(polished, tt, t_root)
+
+    # Newton on the step, unrolled (a loop's overhead per eventful step costs more than
+    # the iterations): on a long step the dense-output root can be far off, and one
+    # iteration from there leaves an error ~ (g''/2ġ)·Δt². An iterate that leaves the
+    # radius ends the iteration at the last one inside.
+    tt, going, polished = t_root, jnp.array(True), jnp.array(False)
+    for _ in range(_REFINE_ITERATIONS):
+        value, slope = jax.lax.stop_gradient(slope_at(tt, state_at(tt)))
+        new = tt - jnp.where(slope == 0, 0.0, value / jnp.where(slope == 0, 1.0, slope))
+        ok = going & (jnp.abs(new - t_root) <= radius)
+        tt, going, polished = jnp.where(ok, new, tt), ok, polished | ok
     # Not polished (a flat event function, ġ ≈ 0: a graze): keep the dense-output root
     # and its state, which are consistent with each other.
     z = jnp.where(polished, state_at(tt), y_root)
@@ -166,6 +179,11 @@ def _refine(state_at, rate, value_of, t_root, y_root, radius):
     step = jnp.where(slope == 0, 0.0, value / jnp.where(slope == 0, 1.0, slope))
     delta = -(step - jax.lax.stop_gradient(step))  # numerically 0
     return tt + delta, z + rate(tt, jax.lax.stop_gradient(z)) * delta
+
+
+def _region_index(mask):
+    """0 in free flight, 1 + i in contact with switch i (the first one in contact)."""
+    return jnp.where(jnp.any(mask), jnp.argmax(mask) + 1, 0)
 
 
 def _packed_cond(pred, true_fn, false_fn, dtype):
@@ -212,10 +230,20 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
 
     kink = bool(getattr(model, "observable_kink", False))
 
+    # A rejected trial step can overflow (a stiff contact or the drag's v² over a step
+    # far too long for them). Its values are discarded, but reverse mode still runs
+    # through them, and a zero cotangent times an infinite partial derivative is NaN.
+    # Clipping every evaluation of the right-hand side at `huge` keeps all values and
+    # partials finite; a state beyond `huge` counts as non-finite.
+    huge = float(jnp.finfo(dtype).max) ** 0.8
+
     def rhs(t, y, mask, direction):
-        if kink:
-            return model.region_vector_field(t, y, mask, direction)
-        return model.region_vector_field(t, y, mask)
+        f = (
+            model.region_vector_field(t, y, mask, direction)
+            if kink
+            else model.region_vector_field(t, y, mask)
+        )
+        return jnp.clip(f, -huge, huge)
 
     g0 = model.switches(y0)
     dg0 = jax.jvp(model.switches, (y0,), (model.region_vector_field(t0, y0, g0 > 0),))[1]
@@ -234,8 +262,8 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
 
     def contact_force_abs(y, mask):
         # |m a − m a_free|: the contact force magnitude in a region.
-        a = model.region_vector_field(t0, y, mask)[1:]
-        a_free = model.region_vector_field(t0, y, jnp.zeros_like(mask))[1:]
+        a = rhs(t0, y, mask, jnp.ones((), dtype))[1:]
+        a_free = rhs(t0, y, jnp.zeros_like(mask), jnp.ones((), dtype))[1:]
         return jnp.max(jnp.abs(a - a_free)) * model.contact_mass
 
     start_in_contact = jnp.any(mask0)
@@ -252,6 +280,9 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         y=y0,
         mask=mask0,
         dt=jnp.asarray(dt0, dtype),
+        # The last accepted step in each kind of region (free, then in contact with
+        # switch i): the first step after a crossing starts from the previous visit's.
+        dt_region=jnp.full(n_sw + 1, jnp.inf, dtype),
         f0=f_init,
         direction=direction0,
         seen_extremum=jnp.array(False),
@@ -303,7 +334,7 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         dense = dict(y0=y, y1=y1, k=k)
         scale = settings.atol + settings.rtol * jnp.maximum(jnp.abs(y), jnp.abs(y1))
         err = jnp.sqrt(jnp.mean((y_err / scale) ** 2))
-        finite = jnp.all(jnp.isfinite(y1)) & jnp.isfinite(err)
+        finite = jnp.all(jnp.abs(y1) < huge) & (err < jnp.inf)  # False for NaN too
         accept = (err <= 1.0) & finite
         factor = jnp.clip(0.9 * jnp.where(err > 0, err, 1e-10) ** (-exponent), 0.2, 10.0)
         factor = jnp.where(finite, factor, 0.2)
@@ -378,12 +409,26 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
             new_mask = jnp.where(crossing, mask.at[wall].set(entering), mask)
             # With a kink at the observable's root, the piece ends there (before any
             # later crossing, which the next piece finds again) and the sign flips.
-            flip = (has_ext & (t_ext < t_star)) if kink else jnp.array(False)
+            # A kink too weak to matter (|Δf|·h far below the tolerance: a contact at
+            # rest, where v only rings at rounding level) does not end the piece: the
+            # step is kept and the next one takes the sign v has at its end. Ending a
+            # piece at every ring would double the steps of a long rest.
+            if kink:
+                jump = jax.vmap(lambda z: rhs(t, z, mask, direction) - rhs(t, z, mask, -direction))(sub_y)
+                kink_err = jnp.max(jnp.abs(jump) * h / scale)
+                flip = has_ext & (t_ext < t_star) & (kink_err > _NEGLIGIBLE_KINK)
+            else:
+                flip = jnp.array(False)
             crossing = crossing & ~flip
             t_end = jnp.where(flip, t_ext, t_star)
             y_end = jnp.where(flip, y_ext, y_star)
             new_mask = jnp.where(flip, mask, new_mask)
-            new_direction = jnp.where(flip, -direction, direction)
+            if kink:
+                obs_end = model.observable(jnp.where(crossing, y_star, y1))
+                sign_end = jnp.where(obs_end != 0, jnp.sign(obs_end), direction).astype(dtype)
+                new_direction = jnp.where(flip, -direction, jnp.where(has_ext, sign_end, direction))
+            else:
+                new_direction = direction
 
             # Refine the event time on the pair's own step (the dense output is less
             # accurate than a step; Dopri8's much less): Newton on t ↦ g(step(t0 → t)),
@@ -400,19 +445,22 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
             t_end = jnp.where(crossing | flip, t_ref, t_next)
             # The region changed: restart FSAL with the new right-hand side.
             f_end = rhs(t_end, y_end, new_mask, new_direction)
+            restart = crossing | flip | (new_direction != direction)
             return dict(
                 t_end=t_end,
                 y_end=y_end,
                 mask=new_mask,
                 direction=new_direction,
-                f0=jnp.where(crossing | flip, f_end, f1),
+                f0=jnp.where(restart, f_end, f1),
                 # With a kink the extremum ends the piece: its refined time and state.
                 ext=(
                     flip | (has_ext & (t_ext < t_star)),
                     jnp.where(flip, t_end, t_ext),
                     jnp.where(flip, y_end, y_ext),
                 ),
-                cross=(crossing, t_star, y_star, entering, wall),
+                # The refined crossing (the dense output's root can be far off on a long
+                # step: the record must hold where the piece really ends).
+                cross=(crossing, t_end, y_end, entering, wall),
             )
 
         out = _packed_cond(eventful, eventful_step, plain, dtype)
@@ -453,7 +501,16 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         c["mask"] = jnp.where(accept, out["mask"], mask)
         c["f0"] = jnp.where(accept, out["f0"], c["f0"])
         c["direction"] = jnp.where(accept, out["direction"], direction)
-        c["dt"] = jnp.where(event, jnp.minimum(dt_new, jax.lax.stop_gradient(h)), dt_new)
+        # A crossing changes the right-hand side, so the step size just used says little
+        # about the new region: start from the last accepted step of its previous visit
+        # (repeated bounces look alike: no rejections at each contact entry), or on a
+        # first visit from min(dt_new, h), shrinking on rejection.
+        h_used = jax.lax.stop_gradient(h)
+        dt_region = jnp.where(accept, c["dt_region"].at[_region_index(mask)].set(h_used), c["dt_region"])
+        remembered = dt_region[_region_index(out["mask"])]
+        first_visit = jnp.where(remembered < jnp.inf, remembered, jnp.minimum(dt_new, h_used))
+        c["dt_region"] = dt_region
+        c["dt"] = jnp.where(event, first_visit, dt_new)
         return c
 
     buffers = lambda c: [c["rec"], c["ev"]]  # noqa: E731

@@ -77,6 +77,37 @@ def test_trace_recovers_kappa_and_k_r(reference):
     assert result.identifiable["kappa"] and result.identifiable["k_r"] and result.identifiable["restitution"]
     # The noise level is consistent with the file's σ (reduced χ² near 1).
     assert 0.8 <= result.chi2 / (len(result.residuals) - 2) <= 1.2
+    assert result.goodness["consistent"] is True
+
+
+def test_impacts_without_their_offset_fail_the_chi2_test_and_identify_nothing(reference):
+    """Acoustic impact times whose clock is 41 ms off the release, fitted without the
+    offset: the optimizer converges to a κ that means nothing, with tiny stderrs. The χ²
+    test against the file's σ must say so, and no quantity may be called identifiable."""
+    result = identify.fit(_impacts(reference, seed=2), starts=1)
+    report = result.report()
+    print("\n" + report)
+    g = result.goodness
+    assert g["reduced_chi2"] > 100 and g["consistent"] is False and g["p_value"] < 1e-3
+    assert not any(result.identifiable.values())
+    assert "WARNING: the model does not fit the data" in report and "--fit offset" in report
+    doc = result.to_json_dict()
+    assert doc["goodness_of_fit"]["consistent"] is False
+    assert not any(doc["identifiable"].values())
+
+
+@pytest.mark.parametrize(("chi2", "n", "p"), [(3.0, 12, 2), (25.0, 14, 2), (1550.0, 1501, 2), (40.0, 3, 2)])
+def test_goodness_of_fit_p_value_matches_scipy(chi2, n, p):
+    from scipy.stats import chi2 as chi2_dist
+
+    from identify._uncertainty import goodness_of_fit
+
+    g = goodness_of_fit(chi2, n, p, sigma_known=True)
+    assert g["dof"] == n - p
+    assert g["p_value"] == pytest.approx(chi2_dist.sf(chi2, n - p), rel=1e-9, abs=1e-300)
+    assert g["consistent"] == (chi2_dist.sf(chi2, n - p) >= 1e-3)
+    untested = goodness_of_fit(chi2, n, p, sigma_known=False)
+    assert untested["p_value"] is None and untested["consistent"] is None
 
 
 def test_noise_estimated_from_residuals_when_the_file_states_none(reference):
@@ -101,6 +132,7 @@ def test_impacts_recover_restitution_with_unknown_offset(reference):
     assert abs(result.derived["restitution"]["value"] - E_TRUE) <= 0.005
     assert abs(result.parameters["offset"]["value"] - OFFSET) <= 1e-3
     assert _covers(result.derived["restitution"], E_TRUE)
+    assert result.goodness["consistent"] is True
 
 
 def test_apex_heights_identify_e_but_not_kappa(reference):
