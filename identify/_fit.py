@@ -47,6 +47,8 @@ from ._result import FitResult
 from ._uncertainty import Z95, covariance, goodness_of_fit, summarize
 
 METHODS = ("lm", "optax")
+#: (e, t_c, m) → (κ, k_r), compiled once (eagerly, each of its operations compiles on first use).
+_kelvin_voigt_inverse = jax.jit(ju.parameters_from_restitution)
 _WINDOWS = (0.35, 0.65, 1.0)
 #: sd of log t_c in the steering prior: the 0.5–2 ms prior as ±2 sd around 1 ms.
 _PRIOR_SD = math.log(2.0) / 2.0
@@ -301,7 +303,7 @@ def fit(
     evaluator = _Evaluator(problem, free, fd, mass, prior=0 in free and 1 in free)
 
     def start_point(e, t_c):
-        kappa, k_r = ju.parameters_from_restitution(e, t_c, mass)
+        kappa, k_r = _kelvin_voigt_inverse(e, t_c, mass)
         v = {"kappa": float(kappa), "k_r": float(k_r), **values}
         v.update({k: initial[k] for k in ("kappa", "k_r") if k in initial})
         return np.clip(to_z(v), lo, hi)

@@ -139,19 +139,23 @@ def _entry(value: float, sd: float, *, log: bool, clip: tuple[float, float] | No
     return {"value": value, "stderr": stderr, "ci95": [lo, hi]}
 
 
-def _derived_gradients(z: np.ndarray, mass: float) -> tuple[float, float, np.ndarray, np.ndarray]:
-    """e and t_c, and the gradients of e and log t_c with respect to (log κ, log k_r)."""
-
+@jax.jit
+def _derived_jit(u, mass):
+    # One compiled function (run eagerly, its dozens of small operations would each
+    # compile on first use: about 0.5 s of a cold fit).
     def e_of(u):
         return ju.restitution(jnp.exp(u[0]), jnp.exp(u[1]), mass)
 
     def log_tc_of(u):
         return jnp.log(ju.contact_time(jnp.exp(u[0]), jnp.exp(u[1]), mass))
 
-    u = jnp.asarray(z[:2], float)
-    e = float(e_of(u))
-    t_c = float(jnp.exp(log_tc_of(u)))
-    return e, t_c, np.asarray(jax.grad(e_of)(u)), np.asarray(jax.grad(log_tc_of)(u))
+    return e_of(u), jnp.exp(log_tc_of(u)), jax.grad(e_of)(u), jax.grad(log_tc_of)(u)
+
+
+def _derived_gradients(z: np.ndarray, mass: float) -> tuple[float, float, np.ndarray, np.ndarray]:
+    """e and t_c, and the gradients of e and log t_c with respect to (log κ, log k_r)."""
+    e, t_c, grad_e, grad_log_tc = _derived_jit(jnp.asarray(z[:2], float), jnp.asarray(mass, float))
+    return float(e), float(t_c), np.asarray(grad_e), np.asarray(grad_log_tc)
 
 
 def summarize(z: np.ndarray, cov: np.ndarray, free: list[int], mass: float, *, rel_halfwidth: float = 0.25):
