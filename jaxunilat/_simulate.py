@@ -264,12 +264,15 @@ def simulate(
             if np.any(np.diff(arr) < 0) or arr[0] < float(t0) or arr[-1] > float(t1):
                 raise ValueError(f"ts must be sorted within [t0, t1] = [{float(t0):g}, {float(t1):g}] s")
     if solver == "event":
-        if not isinstance(getattr(model, "heaviside", Exact()), Exact):
+        heaviside = getattr(model, "heaviside", None)
+        if heaviside is not None and not isinstance(heaviside, Exact):
             raise ValueError(
                 f"heaviside = {type(model.heaviside).__name__} is not supported with solver='event'; "
                 "the event mode solves the exact model: use heaviside=Exact()"
             )
-        if not hasattr(model, "switches"):
+        # On the class: on the instance, equinox wraps the method in a new bound-method
+        # Module, which costs more than the check itself (this runs on every call).
+        if not hasattr(type(model), "switches"):
             raise ValueError(f"solver = 'event' is not supported for {type(model).__name__}")
     settings = make_settings(
         solver,
