@@ -29,6 +29,7 @@ about 1e-6 relative here, and cost 2p + 1 forward runs.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 
@@ -38,17 +39,15 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-import jaxunilat as ju
 from jaxunilat._validate import check_choice, check_range
 
 from ._initial import CONTACT_TIME_GUESS, CONTACT_TIME_PRIOR, first_impact_time, initial_restitution
+from ._kelvin_voigt import parameters_from_restitution
 from ._problem import LOG_PARAMETERS, NUISANCE, PARAMETERS, Problem, evaluate_rows, make_problem, to_z
 from ._result import FitResult
 from ._uncertainty import Z95, covariance, goodness_of_fit, summarize
 
 METHODS = ("lm", "optax")
-#: (e, t_c, m) → (κ, k_r), compiled once (eagerly, each of its operations compiles on first use).
-_kelvin_voigt_inverse = jax.jit(ju.parameters_from_restitution)
 _WINDOWS = (0.35, 0.65, 1.0)
 #: sd of log t_c in the steering prior: the 0.5–2 ms prior as ±2 sd around 1 ms.
 _PRIOR_SD = math.log(2.0) / 2.0
@@ -66,6 +65,9 @@ _DEFAULT_BOUNDS = {
 def default_optimizer(learning_rate: float = 0.02) -> optax.GradientTransformation:
     """The default gradient stage: clip the update norm to 1, then Adam (on z, logs)."""
     return optax.chain(optax.clip_by_global_norm(1.0), optax.adam(learning_rate))
+
+
+_DEFAULT_OPTIMIZER = default_optimizer()
 
 
 def _load(data):
@@ -103,7 +105,7 @@ class _Evaluator:
             h[1 + j, i] = self.steps[i]
             h[1 + p + j, i] = -self.steps[i]
         zs = z[None, :] + h
-        res, ok = evaluate_rows(self.problem, jnp.asarray(zs))
+        res, ok = evaluate_rows(self.problem, jax.device_put(zs))
         res, ok = np.asarray(res), np.asarray(ok)
         if self.prior:
             res = np.concatenate([res, self._prior(zs)[:, None]], axis=1)
@@ -118,8 +120,8 @@ class _Evaluator:
         for k in range(0, len(zs), rows):
             chunk = np.asarray(zs[k : k + rows])
             pad = np.concatenate([chunk, np.repeat(chunk[-1:], rows - len(chunk), axis=0)])
-            res, ok = evaluate_rows(self.problem, jnp.asarray(pad))
-            res = np.asarray(res)
+            res, ok = evaluate_rows(self.problem, jax.device_put(pad))
+            res, ok = np.asarray(res), np.asarray(ok)
             if self.prior:
                 res = np.concatenate([res, self._prior(pad)[:, None]], axis=1)
             out += [(res[i], bool(ok[i])) for i in range(len(chunk))]
@@ -303,8 +305,8 @@ def fit(
     evaluator = _Evaluator(problem, free, fd, mass, prior=0 in free and 1 in free)
 
     def start_point(e, t_c):
-        kappa, k_r = _kelvin_voigt_inverse(e, t_c, mass)
-        v = {"kappa": float(kappa), "k_r": float(k_r), **values}
+        kappa, k_r = parameters_from_restitution(e, t_c, mass)
+        v = {"kappa": kappa, "k_r": k_r, **values}
         v.update({k: initial[k] for k in ("kappa", "k_r") if k in initial})
         return np.clip(to_z(v), lo, hi)
 
@@ -330,7 +332,7 @@ def fit(
         candidates.append(start_point(e, float(t_c)))
 
     # -- optional gradient stage, then LM on growing windows ----------------------------
-    optimizer = optimizer if optimizer is not None else default_optimizer()
+    optimizer = optimizer if optimizer is not None else _DEFAULT_OPTIMIZER
     step_fn = _gradient_step(optimizer) if method == "optax" else None
     # Every start is fitted on the first window loosely (it only has to find the basin);
     # the best one goes on through the longer windows, then one tight pass on all data.
@@ -500,7 +502,10 @@ def _profile_kappa(evaluator, z_hat, free, lo, hi, cov, s2, max_iterations, cost
     )
 
 
+@functools.lru_cache(maxsize=8)
 def _gradient_step(optimizer):
+    # Cached per optimizer: a new jitted step for every fit would recompile the
+    # reverse-mode pass through the event mode each time.
     @eqx.filter_jit
     def step(problem, z, opt_state, mask):
         def loss(z):

@@ -128,6 +128,11 @@ def evaluate_rows(problem: Problem, zs) -> tuple[Array, Array]:
     return jax.lax.map(problem.residuals, zs)
 
 
+def _device(value) -> Array:
+    """A float64 jax array of `value` (jax.device_put compiles nothing; jnp.asarray would)."""
+    return jax.device_put(np.asarray(value, dtype=float))
+
+
 def make_problem(
     data, *, tol: float = 1e-10, has_drag: bool, sigma: float = 1.0, horizon: float | None = None
 ):
@@ -150,11 +155,11 @@ def make_problem(
         n_events=n_events,
         tol=float(tol),
         max_steps=max_steps,
-        mass=jnp.asarray(data.mass, float),
-        gravity=jnp.asarray(data.gravity, float),
-        half_gap=jnp.asarray(0.0 if data.gap is None else data.gap / 2, float),
-        t_obs=jnp.asarray(t_obs, float),
-        y_obs=jnp.asarray(y_obs, float),
-        sigma=jnp.asarray(sigma, float),
-        horizon=jnp.asarray(horizon, float),
+        mass=_device(data.mass),
+        gravity=_device(data.gravity),
+        half_gap=_device(0.0 if data.gap is None else data.gap / 2),
+        t_obs=_device(t_obs),
+        y_obs=_device(y_obs),
+        sigma=_device(sigma),
+        horizon=_device(horizon),
     )

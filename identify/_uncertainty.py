@@ -31,12 +31,9 @@ from __future__ import annotations
 
 import math
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
-import jaxunilat as ju
-
+from ._kelvin_voigt import restitution_and_contact_time
 from ._problem import LOG_PARAMETERS, PARAMETERS
 
 Z95 = 1.959963984540054
@@ -139,25 +136,6 @@ def _entry(value: float, sd: float, *, log: bool, clip: tuple[float, float] | No
     return {"value": value, "stderr": stderr, "ci95": [lo, hi]}
 
 
-@jax.jit
-def _derived_jit(u, mass):
-    # One compiled function (run eagerly, its dozens of small operations would each
-    # compile on first use: about 0.5 s of a cold fit).
-    def e_of(u):
-        return ju.restitution(jnp.exp(u[0]), jnp.exp(u[1]), mass)
-
-    def log_tc_of(u):
-        return jnp.log(ju.contact_time(jnp.exp(u[0]), jnp.exp(u[1]), mass))
-
-    return e_of(u), jnp.exp(log_tc_of(u)), jax.grad(e_of)(u), jax.grad(log_tc_of)(u)
-
-
-def _derived_gradients(z: np.ndarray, mass: float) -> tuple[float, float, np.ndarray, np.ndarray]:
-    """e and t_c, and the gradients of e and log t_c with respect to (log κ, log k_r)."""
-    e, t_c, grad_e, grad_log_tc = _derived_jit(jnp.asarray(z[:2], float), jnp.asarray(mass, float))
-    return float(e), float(t_c), np.asarray(grad_e), np.asarray(grad_log_tc)
-
-
 def summarize(z: np.ndarray, cov: np.ndarray, free: list[int], mass: float, *, rel_halfwidth: float = 0.25):
     """Estimates with stderr and CIs, derived e and t_c, correlation and verdicts.
 
@@ -174,7 +152,7 @@ def summarize(z: np.ndarray, cov: np.ndarray, free: list[int], mass: float, *, r
         value = math.exp(z[i]) if log else float(z[i])
         sd = math.sqrt(full[i, i]) if full[i, i] >= 0 else math.nan
         parameters[name] = _entry(value, sd, log=log)
-    e, t_c, ge, gt = _derived_gradients(z, mass)
+    e, t_c, ge, gt = restitution_and_contact_time(float(z[0]), float(z[1]), mass)
     sub = full[:2, :2]
     with np.errstate(invalid="ignore"):
         var_e = float(ge @ sub @ ge) if np.all(np.isfinite(sub)) else math.inf
