@@ -95,3 +95,40 @@ def test_a_cold_fit_compiles_only_its_evaluator_and_a_second_fit_nothing():
     # Anything else is host-side jax.numpy on scalars (each op compiles on first use).
     assert first == ["jit(evaluate_rows)"]
     assert second == []
+
+
+class _LinearEvaluator:
+    """r(z) = M z − b with its exact Jacobian: Levenberg–Marquardt's answer is the lstsq one."""
+
+    def __init__(self, m, b):
+        self.m, self.b, self.free, self.calls = m, b, list(range(m.shape[1])), 0
+
+    def __call__(self, z):
+        self.calls += 1
+        return self.m @ z - self.b, self.m.copy(), True
+
+
+@pytest.mark.parametrize("correlation", [0.0, 0.999999])
+def test_levenberg_marquardt_reaches_least_squares_and_stops_without_noise_trials(correlation):
+    from identify._fit import _levenberg_marquardt
+
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal(200)
+    # Two regressors with the given correlation (the κ–k_r ridge of a rebound fit is ~0.99999).
+    m = np.column_stack([x, correlation * x + math.sqrt(1 - correlation**2) * rng.standard_normal(200)])
+    b = m @ np.array([2.0, -1.0]) + 0.1 * rng.standard_normal(200)
+    evaluator = _LinearEvaluator(m, b)
+    big = np.full(2, 1e9)
+    z, r, _, cost, iterations, converged, why = _levenberg_marquardt(
+        evaluator, np.zeros(2), [0, 1], np.ones(200), -big, big, max_iterations=60
+    )
+    expected = np.linalg.lstsq(m, b, rcond=None)[0]
+    assert converged
+    # Reduced χ² ~ 0.01, dchi2 = 1e-6 of it: the estimate is within ~1e-3 standard errors.
+    sd = np.sqrt(np.diag(np.linalg.inv(m.T @ m)) * 2 * cost / 198)
+    assert np.all(np.abs(z - expected) <= 1e-3 * sd)
+    assert cost == pytest.approx(0.5 * np.sum((m @ expected - b) ** 2), rel=1e-9)
+    # A linear model is fitted in a handful of damped steps, and the stop needs no
+    # extra trial runs once the predicted gain is below the tolerance.
+    assert why == "predicted change below tolerance"
+    assert evaluator.calls == iterations + 1 <= 12
