@@ -159,8 +159,8 @@ def notes(result: dict, out: dict) -> dict:
             "missed: the event loop is an equinox checkpointed while loop with every step a checkpoint, "
             "so reverse mode stores each step's carry (O(max_steps) memory, 2048 here) and then runs the "
             "VJP of every step's full body (RK stages, dense interpolant, sub-grid checks, the root "
-            "finders' Newton update) sequentially; the backward of the output evaluation scatters into the "
-            "step record. What would close it: fewer steps (closed-form free flight), a smaller step body, "
+            "finders' Newton update) sequentially; the backward of the output evaluation runs one RK step per save "
+            "time and scatters into the step record. What would close it: fewer steps (closed-form free flight), a smaller step body, "
             "or an adjoint per smooth segment (solve the adjoint ODE backwards with the jump conditions "
             "at the located events)."
         )
@@ -168,8 +168,8 @@ def notes(result: dict, out: dict) -> dict:
         eq = [r["equations"] for r in result["static_structure"] if r["scene"] in ("drag on", "drag = 0")]
         size = f" ({eq[0]} equations)" if eq else ""
         notes["P5"] = (
-            f"missed: the event-mode graph{size} unrolls the RK stages, the dense interpolant, the "
-            "sub-grid crossing checks and the Newton root finder; what would close it: a smaller "
+            f"missed: the event-mode graph{size} unrolls the RK stages (in the loop, and again for the "
+            "outputs at the save times), the dense interpolant, the sub-grid crossing checks and the Newton root finder; what would close it: a smaller "
             "graph (fewer sub-grid checks, one shared root finder), or the persistent compilation "
             "cache (jax.config.update('jax_compilation_cache_dir', ...)) across runs."
         )
