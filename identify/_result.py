@@ -39,7 +39,8 @@ class FitResult:
     - `residuals`: prediction − data, in the data's units.
     - `starts`: the cost and convergence of every start; `initial`: the closed-form
       start; `profile`: the profile likelihood of κ (when asked for).
-    - `simulations`: compiled evaluations (each 2p + 1 event-mode runs); `wall_s`.
+    - `simulations`: compiled evaluations (each 2q + 1 event-mode runs, q the free
+      parameters other than the offset, whose Jacobian column needs no run); `wall_s`.
     """
 
     data: Any
@@ -178,7 +179,7 @@ class FitResult:
             f"    starts             = {len(self.starts)}, best chi-square of each: " + _costs(self.starts)
         )
         lines.append(f"    LM iterations      = {self.iterations}")
-        lines.append(f"    function evals     = {self.simulations} (each 2p+1 event-mode runs)")
+        lines.append(f"    function evals     = {self.simulations} (each 2q+1 event-mode runs)")
         lines.append(f"    chi-square         = {self.chi2:.6g}")
         n, p = len(self.residuals), len(self.free)
         lines.append(f"    reduced chi-square = {self.chi2 / max(n - p, 1):.6g}")

@@ -135,6 +135,38 @@ def test_impacts_recover_restitution_with_unknown_offset(reference):
     assert result.goodness["consistent"] is True
 
 
+def test_offset_column_is_closed_form_and_takes_no_runs(reference):
+    """The offset only shifts the predicted onsets: its Jacobian column is 1/σ, from no run.
+
+    Checked against a central difference of residuals from explicit runs at offset ± h,
+    and the κ, k_r columns still come from 2 runs each (5 runs per call, not 7).
+    """
+    from identify._fit import _Evaluator
+    from identify._problem import PARAMETERS, evaluate_rows, make_problem, to_z
+
+    data = _impacts(reference, seed=7, n=8)
+    problem = make_problem(data, has_drag=True, sigma=data.noise, horizon=float(data.t[-1]) - OFFSET + 0.3)
+    z = to_z(dict(kappa=TRUE["kappa"], k_r=TRUE["k_r"], drag=DRAG, x0=X0, v0=0.0, offset=OFFSET))
+    free = [PARAMETERS.index(n) for n in ("kappa", "k_r", "offset")]
+    steps = np.array([1e-4, 1e-4, 1e-4, 1e-6, 1e-5, 1e-6])
+    evaluator = _Evaluator(problem, free, steps, MASS, prior=False)
+    assert evaluator.rows == 5
+    r, jac, ok = evaluator(z)
+    assert ok and jac.shape == (8, 3) and np.all(np.isfinite(jac))
+
+    h, i = 1e-4, PARAMETERS.index("offset")
+    zs = np.repeat(z[None, :], 5, axis=0)
+    zs[0, i] += h
+    zs[1, i] -= h
+    res, ok_rows = evaluate_rows(problem, zs)
+    res = np.asarray(res)
+    assert np.all(np.asarray(ok_rows))
+    np.testing.assert_allclose(jac[:, 2], (res[0] - res[1]) / (2 * h), rtol=1e-8)
+    np.testing.assert_allclose(r, res[2], rtol=0, atol=0)
+    # κ and k_r move the onsets (later bounces more): their columns are real differences.
+    assert np.all(np.abs(jac[1:, :2]) > 0)
+
+
 def test_apex_heights_identify_e_but_not_kappa(reference):
     heights = _apex_heights(reference, 8)
     noise = 1e-3
