@@ -125,10 +125,9 @@ class _Evaluator:
     def __call__(self, z):
         fd = self.differenced
         p = len(fd)
-        h = np.zeros((2 * p + 1, len(PARAMETERS)))
-        for j, i in enumerate(fd):
-            h[1 + j, i] = self.steps[i]
-            h[1 + p + j, i] = -self.steps[i]
+        h = np.zeros((self.rows, len(PARAMETERS)))
+        h[1 + np.arange(p), fd] = self.steps[fd]
+        h[1 + p + np.arange(p), fd] = -self.steps[fd]
         zs = z[None, :] + h
         res, ok = evaluate_rows(self.problem, jax.device_put(zs))
         res, ok = np.asarray(res), np.asarray(ok)
@@ -137,12 +136,10 @@ class _Evaluator:
             res = np.concatenate([res, self._prior(zs)[:, None]], axis=1)
         self.calls += 1
         jac = np.zeros((res.shape[1], len(self.free)))
-        for j, i in enumerate(self.free):
-            if i in fd:
-                k = fd.index(i)
-                jac[:, j] = (res[1 + k] - res[1 + p + k]) / (2 * self.steps[i])
-            else:  # a shift: r = (prediction + value − data)/σ
-                jac[:n_data, j] = np.broadcast_to(1.0 / np.asarray(self.problem.sigma), (n_data,))
+        jac[:, [self.free.index(i) for i in fd]] = (res[1 : 1 + p] - res[1 + p :]).T / (2 * self.steps[fd])
+        # A shift: r = (prediction + value − data)/σ, so ∂r/∂value = 1/σ on the data rows.
+        shifts = [j for j, i in enumerate(self.free) if i not in fd]
+        jac[:n_data, shifts] = (1.0 / np.broadcast_to(np.asarray(self.problem.sigma), (n_data,)))[:, None]
         return res[0], jac, bool(ok[0] and np.all(ok))
 
     def values(self, zs):
