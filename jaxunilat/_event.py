@@ -114,32 +114,44 @@ def _interp(solver_cls, t0, t1, dense):
     return solver_cls.interpolation_cls(t0=t0, t1=t1, **dense)
 
 
-def _locate(f, a, b, positive_left=None):
+def _locate(f, a, b, positive_left=None, active=None):
     """A root of f in [a, b], given that f changes sign on (a, b].
 
     `positive_left` (optional) is the sign of f just right of a, where f(a) itself may
-    be a rounding-level zero (a piece that starts at a root).
+    be a rounding-level zero (a piece that starts at a root). With `active` False
+    (optional) no iteration runs: a vmapped caller that needs only some of its roots
+    does not keep the loop going for the others.
 
     Newton's method safeguarded by bisection, on a bracket that only shrinks, under
-    stop_gradient: it stops improving at machine precision instead of failing a
-    tolerance float64 cannot meet. Then one differentiable Newton step, whose
-    derivative is −(∂f/∂θ)/ḟ: the implicit-function gradient of the root.
+    stop_gradient: it stops when an iterate moves by a few ulps (or after `_ITERATIONS`)
+    instead of failing a tolerance float64 cannot meet. Then one differentiable Newton
+    step, whose derivative is −(∂f/∂θ)/ḟ: the implicit-function gradient of the root.
     """
     a, b = jax.lax.stop_gradient(a), jax.lax.stop_gradient(b)
     if positive_left is None:
         positive_left = jax.lax.stop_gradient(f(a)) > 0
+    eps = 4 * jnp.finfo(a.dtype).eps
 
-    def body(_, state):
-        lo, hi, x = state
+    def body(state):
+        i, lo, hi, x, _ = state
         fx, dfx_ = jax.lax.stop_gradient(jax.jvp(f, (x,), (jnp.ones_like(x),)))
         left = (fx > 0) == positive_left
         lo = jnp.where(left, x, lo)
         hi = jnp.where(left, hi, x)
         newton = x - fx / jnp.where(dfx_ == 0, 1.0, dfx_)
         inside = (newton >= lo) & (newton <= hi) & (dfx_ != 0)
-        return lo, hi, jnp.where(inside, newton, 0.5 * (lo + hi))
+        new = jnp.where(inside, newton, 0.5 * (lo + hi))
+        # Converged: Newton's quadratic convergence makes the next move far smaller.
+        return i + 1, lo, hi, new, jnp.abs(new - x) <= eps * jnp.abs(new)
 
-    _, _, root = jax.lax.fori_loop(0, _ITERATIONS, body, (a, b, 0.5 * (a + b)))
+    def going(state):
+        return (state[0] < _ITERATIONS) & ~state[4]
+
+    # Most roots converge in 3–5 iterations; a loop that stops there costs less per
+    # eventful step than a fixed count (grazing roots still get all `_ITERATIONS`).
+    idle = jnp.array(False) if active is None else ~jax.lax.stop_gradient(active)
+    state = (jnp.array(0), a, b, 0.5 * (a + b), idle)
+    root = jax.lax.while_loop(going, body, state)[3]
     value, slope = jax.jvp(f, (root,), (jnp.ones_like(root),))
     step = jnp.where(slope == 0, 0.0, value / jnp.where(slope == 0, 1.0, slope))
     # Numerically ~0 (the root is located to machine precision); it carries the
@@ -167,16 +179,26 @@ def _refine(state_at, rate, value_of, t_root, y_root, radius):
 
     t_root = jax.lax.stop_gradient(t_root)
 
-    # Newton on the step, unrolled (a loop's overhead per eventful step costs more than
-    # the iterations): on a long step the dense-output root can be far off, and one
-    # iteration from there leaves an error ~ (g''/2ġ)·Δt². An iterate that leaves the
-    # radius ends the iteration at the last one inside.
-    tt, going, polished = t_root, jnp.array(True), jnp.array(False)
-    for _ in range(_REFINE_ITERATIONS):
+    # Newton on the step: on a long step the dense-output root can be far off, and one
+    # iteration from there leaves an error ~ (g''/2ġ)·Δt². The loop stops once an
+    # update is at rounding level (often after one step evaluation), or when an iterate
+    # leaves the radius (it then ends at the last one inside).
+    eps = 16 * jnp.finfo(t_root.dtype).eps
+
+    def body(state):
+        i, tt, _, polished = state
         value, slope = jax.lax.stop_gradient(slope_at(tt, state_at(tt)))
         new = tt - jnp.where(slope == 0, 0.0, value / jnp.where(slope == 0, 1.0, slope))
-        ok = going & (jnp.abs(new - t_root) <= radius)
-        tt, going, polished = jnp.where(ok, new, tt), ok, polished | ok
+        ok = jnp.abs(new - t_root) <= radius
+        moved = jnp.abs(new - tt) > eps * jnp.abs(tt)
+        return i + 1, jnp.where(ok, new, tt), ok & moved, polished | ok
+
+    def going(state):
+        return (state[0] < _REFINE_ITERATIONS) & state[2]
+
+    _, tt, _, polished = jax.lax.while_loop(
+        going, body, (jnp.array(0), t_root, jnp.array(True), jnp.array(False))
+    )
     # Not polished (a flat event function, ġ ≈ 0: a graze): keep the dense-output root
     # and its state, which are consistent with each other.
     z = jnp.where(polished, state_at(tt), y_root)
@@ -397,17 +419,23 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
             first_pt = jnp.where(jnp.any(wrong, axis=0), jnp.argmax(wrong, axis=0), n_pts)
             crossing = jnp.any(wrong)
 
+            # Only the walls crossed first on the check points can hold the earliest
+            # root (a later first point means a later root): locate only those.
+            first = first_pt == jnp.min(first_pt)
+
             def root_of(i):
                 pc = jnp.minimum(first_pt[i], n_pts - 1)
                 a = jnp.where(first_pt[i] == 0, t, check_t[jnp.maximum(pc - 1, 0)])
-                return _locate(lambda s: model.switches(interp.evaluate(s))[i], a, check_t[pc])
+                return _locate(
+                    lambda s: model.switches(interp.evaluate(s))[i], a, check_t[pc], active=first[i]
+                )
 
             roots = jax.lax.cond(
                 crossing,
                 lambda: jax.vmap(root_of)(jnp.arange(n_sw)),
                 lambda: jnp.full(n_sw, jnp.inf, dtype),
             )
-            roots = jnp.where(first_pt < n_pts, roots, jnp.inf)
+            roots = jnp.where((first_pt < n_pts) & first, roots, jnp.inf)
             wall = jnp.argmin(roots)
             t_star = jnp.where(crossing, roots[wall], t_next)
             y_star = jnp.where(crossing, interp.evaluate(t_star), y1)
