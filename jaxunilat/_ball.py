@@ -9,9 +9,14 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike
 
 from ._contact import AbstractContactLaw, KelvinVoigt
+from ._flight import MAX_PHI, apex_rise, apex_time, fall_time, flight_state, rise_time
 from ._heaviside import AbstractHeaviside, Exact
 from ._model import AbstractModel
 from ._validate import check_range
+
+#: A closed-form flight whose apex is within this many ulps of the upper wall grazes it
+#: without contact (see `Ball.flight_events`).
+_GRAZE_ULPS = 64
 
 #: The paper's constants [K90 §5.1]: gap 2a (m), mass (kg), gravity (m/s²), drag k (s/m).
 PAPER_GAP = 0.8
@@ -204,6 +209,43 @@ class Ball(AbstractModel):
     def observable(self, y: Array) -> Array:
         """The quantity whose roots are apexes (in flight) and deepest points (in contact): v."""
         return y[1]
+
+    def flight_state(self, y: Array, tau: Array, direction: Array) -> Array:
+        """The state after `tau` s of free flight from `y`, in closed form (see
+        `jaxunilat._flight`), in a piece where v has the sign `direction` (±1; a rising
+        piece ends at its apex). Used by the event mode's `flight="closed"`."""
+        x, v = flight_state(y[0], y[1], tau, self.gravity, self.drag, direction > 0)
+        return jnp.stack([x, v])
+
+    def flight_events(self, y: Array, direction: Array) -> tuple[Array, Array, Array]:
+        """From `y` in free flight (v of sign `direction`): the time to the apex, the
+        time to each wall (lower first; inf where it is not reached in this piece) and
+        the longest piece, s. A rising ball can only meet the upper wall, a falling one
+        only the lower wall."""
+        x, v = y[0], y[1]
+        rising = direction > 0
+        inf = jnp.full_like(x, jnp.inf)
+        apex = jnp.where(rising, apex_time(v, self.gravity, self.drag), inf)
+        walls = []
+        if self.lower is not None:
+            depth = jnp.maximum(x - self.lower, 0.0)
+            walls.append(jnp.where(rising, inf, fall_time(-v, depth, self.gravity, self.drag)))
+        if self.upper is not None:
+            # An apex within rounding of the wall is a graze, not a contact: a penetration
+            # below the resolution of x could not be located (nor could its exit).
+            rise = apex_rise(v, self.gravity, self.drag)
+            margin = (
+                _GRAZE_ULPS * jnp.finfo(x.dtype).eps * jnp.maximum(jnp.abs(self.upper), jnp.abs(x) + rise)
+            )
+            walls.append(
+                jnp.where(rising, rise_time(v, self.upper - x, self.gravity, self.drag, margin), inf)
+            )
+        longest = inf
+        if self.drag is not None:
+            on = (self.drag > 0) & (self.gravity > 0)
+            rate = jnp.where(on, self.drag * self.gravity, 1.0)
+            longest = jnp.where(on & ~rising, MAX_PHI / rate, inf)
+        return apex, jnp.stack(walls), longest
 
     def energy(self, x: Array, v: Array) -> Array:
         """Kinetic + gravitational (zero at x = 0) + stored contact energy, J."""

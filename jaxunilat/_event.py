@@ -209,6 +209,25 @@ def _refine(state_at, rate, value_of, t_root, y_root, radius):
     return tt + delta, z + rate(tt, jax.lax.stop_gradient(z)) * delta
 
 
+def _first_at_or_after(t_ends, n, ts):
+    """For each time in `ts`: the index of the first of `t_ends[:n]` (sorted) that is
+    ≥ it, or n if none. A binary search over the n filled rows only, so it takes
+    ⌈log2(n + 1)⌉ iterations (about 7 for 100 steps) where `jnp.searchsorted` over the
+    whole buffer takes log2(max_steps) (14 for the default 16 384)."""
+    t_ends = jax.lax.stop_gradient(t_ends)
+    ts = jax.lax.stop_gradient(ts)
+
+    def body(state):
+        lo, hi = state
+        mid = (lo + hi) // 2
+        right = (lo < hi) & (t_ends[jnp.minimum(mid, t_ends.shape[0] - 1)] < ts)
+        return jnp.where(right, mid + 1, lo), jnp.where(right, hi, mid)
+
+    lo = jnp.zeros(ts.shape, n.dtype)
+    hi = jnp.full(ts.shape, n)
+    return jax.lax.while_loop(lambda state: jnp.any(state[0] < state[1]), body, (lo, hi))[0]
+
+
 def _region_index(mask):
     """0 in free flight, 1 + i in contact with switch i (the first one in contact)."""
     return jnp.where(jnp.any(mask), jnp.argmax(mask) + 1, 0)
@@ -256,6 +275,8 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
     dtype = y0.dtype
 
     kink = bool(getattr(model, "observable_kink", False))
+    # Free flight in closed form where the model has one (a scene option, static).
+    closed_flight = settings.flight == "closed" and hasattr(type(model), "flight_state")
 
     # A rejected trial step can overflow (a stiff contact or the drag's v² over a step
     # far too long for them). Its values are discarded, but reverse mode still runs
@@ -349,162 +370,217 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
 
     def body(c):
         t, y, mask = c["t"], c["y"], c["mask"]
-        h = jnp.minimum(jnp.minimum(c["dt"], dtmax), t1 - t)
-        t_next = jnp.where(t1 - (t + h) < 1e-12 * jnp.abs(t1), t1, t + h)
-        h = t_next - t
         direction = c["direction"]
+        in_contact = jnp.any(mask)
 
         def piece_rhs(s, z):
             # The smooth right-hand side of this piece (its region and drag sign).
             return rhs(s, z, mask, direction)
 
-        y1, y_err, k, f1 = _erk_step(solver_cls, piece_rhs, t, h, y, c["f0"])
-        dense = dict(y0=y, y1=y1, k=k)
-        scale = settings.atol + settings.rtol * jnp.maximum(jnp.abs(y), jnp.abs(y1))
-        err = jnp.sqrt(jnp.mean((y_err / scale) ** 2))
-        finite = jnp.all(jnp.abs(y1) < huge) & (err < jnp.inf)  # False for NaN too
-        accept = (err <= 1.0) & finite
-        factor = jnp.clip(0.9 * jnp.where(err > 0, err, 1e-10) ** (-exponent), 0.2, 10.0)
-        factor = jnp.where(finite, factor, 0.2)
-        dt_new = jax.lax.stop_gradient(h * factor)
+        def rk_piece():
+            # One step of the Runge–Kutta pair, and the events inside it.
+            h = jnp.minimum(jnp.minimum(c["dt"], dtmax), t1 - t)
+            t_next = jnp.where(t1 - (t + h) < 1e-12 * jnp.abs(t1), t1, t + h)
+            h = t_next - t
+            y1, y_err, k, f1 = _erk_step(solver_cls, piece_rhs, t, h, y, c["f0"])
+            dense = dict(y0=y, y1=y1, k=k)
+            scale = settings.atol + settings.rtol * jnp.maximum(jnp.abs(y), jnp.abs(y1))
+            err = jnp.sqrt(jnp.mean((y_err / scale) ** 2))
+            finite = jnp.all(jnp.abs(y1) < huge) & (err < jnp.inf)  # False for NaN too
+            accept = (err <= 1.0) & finite
+            factor = jnp.clip(0.9 * jnp.where(err > 0, err, 1e-10) ** (-exponent), 0.2, 10.0)
+            factor = jnp.where(finite, factor, 0.2)
+            dt_new = jax.lax.stop_gradient(h * factor)
 
-        interp = _interp(solver_cls, t, t_next, dense)
-        sub_t = t + fractions * h
-        sub_y = jax.vmap(interp.evaluate)(sub_t)
-        # Cheap tests on the sub-grid: a sign change of the observable (an extremum
-        # inside the step) or a switching function on the wrong side (a crossing).
-        obs_sub = jax.vmap(model.observable)(sub_y)
-        # With a kink the piece may start at a root of the observable (a rounding-level
-        # value of either sign): its sign in the piece is `direction`.
-        obs_start = direction if kink else model.observable(y)
-        prev = jnp.concatenate([obs_start[None], obs_sub[:-1]])
-        flips = (jnp.sign(prev) != jnp.sign(obs_sub)) & (obs_sub != 0)
-        has_ext = jnp.any(flips)
-        g_sub = jax.vmap(model.switches)(sub_y)
-        wrong_sub = jnp.where(mask, g_sub < 0, g_sub > 0)
-        in_contact = jnp.any(mask)
-        eventful = accept & (has_ext | jnp.any(wrong_sub))
+            interp = _interp(solver_cls, t, t_next, dense)
+            sub_t = t + fractions * h
+            sub_y = jax.vmap(interp.evaluate)(sub_t)
+            # Cheap tests on the sub-grid: a sign change of the observable (an extremum
+            # inside the step) or a switching function on the wrong side (a crossing).
+            obs_sub = jax.vmap(model.observable)(sub_y)
+            # With a kink the piece may start at a root of the observable (a rounding-level
+            # value of either sign): its sign in the piece is `direction`.
+            obs_start = direction if kink else model.observable(y)
+            prev = jnp.concatenate([obs_start[None], obs_sub[:-1]])
+            flips = (jnp.sign(prev) != jnp.sign(obs_sub)) & (obs_sub != 0)
+            has_ext = jnp.any(flips)
+            g_sub = jax.vmap(model.switches)(sub_y)
+            wrong_sub = jnp.where(mask, g_sub < 0, g_sub > 0)
+            eventful = accept & (has_ext | jnp.any(wrong_sub))
 
-        def plain():
-            no = jnp.array(False)
-            return dict(
-                t_end=t_next,
-                y_end=y1,
-                mask=mask,
-                direction=direction,
-                f0=f1,
-                ext=(no, t_next, y1),
-                cross=(no, t_next, y1, no, jnp.array(0)),
-            )
-
-        def eventful_step():
-            # Locate the observable's extremum, then check the switches there too:
-            # it is where a short excursion beyond a wall is deepest.
-            j = jnp.argmax(flips)
-            lo = jnp.where(j == 0, t, sub_t[jnp.maximum(j - 1, 0)])
-            sign_left = (jnp.where(j == 0, obs_start, obs_sub[jnp.maximum(j - 1, 0)]) > 0) if kink else None
-            t_ext = jax.lax.cond(
-                has_ext,
-                lambda: _locate(lambda s: model.observable(interp.evaluate(s)), lo, sub_t[j], sign_left),
-                lambda: t_next,
-            )
-            y_ext = interp.evaluate(t_ext)
-            check_t = jnp.concatenate([sub_t, t_ext[None]])
-            check_y = jnp.concatenate([sub_y, y_ext[None]])
-            order = jnp.argsort(check_t)
-            check_t, check_y = check_t[order], check_y[order]
-            g_check = jax.vmap(model.switches)(check_y)  # (points, n_sw)
-            wrong = jnp.where(mask, g_check < 0, g_check > 0)
-            n_pts = check_t.shape[0]
-            first_pt = jnp.where(jnp.any(wrong, axis=0), jnp.argmax(wrong, axis=0), n_pts)
-            crossing = jnp.any(wrong)
-
-            # Only the walls crossed first on the check points can hold the earliest
-            # root (a later first point means a later root): locate only those.
-            first = first_pt == jnp.min(first_pt)
-
-            def root_of(i):
-                pc = jnp.minimum(first_pt[i], n_pts - 1)
-                a = jnp.where(first_pt[i] == 0, t, check_t[jnp.maximum(pc - 1, 0)])
-                return _locate(
-                    lambda s: model.switches(interp.evaluate(s))[i], a, check_t[pc], active=first[i]
+            def plain():
+                no = jnp.array(False)
+                return dict(
+                    t_end=t_next,
+                    y_end=y1,
+                    mask=mask,
+                    direction=direction,
+                    f0=f1,
+                    ext=(no, t_next, y1),
+                    cross=(no, t_next, y1, no, jnp.array(0)),
                 )
 
-            roots = jax.lax.cond(
-                crossing,
-                lambda: jax.vmap(root_of)(jnp.arange(n_sw)),
-                lambda: jnp.full(n_sw, jnp.inf, dtype),
+            def eventful_step():
+                # Locate the observable's extremum, then check the switches there too:
+                # it is where a short excursion beyond a wall is deepest.
+                j = jnp.argmax(flips)
+                lo = jnp.where(j == 0, t, sub_t[jnp.maximum(j - 1, 0)])
+                sign_left = (
+                    (jnp.where(j == 0, obs_start, obs_sub[jnp.maximum(j - 1, 0)]) > 0) if kink else None
+                )
+                t_ext = jax.lax.cond(
+                    has_ext,
+                    lambda: _locate(lambda s: model.observable(interp.evaluate(s)), lo, sub_t[j], sign_left),
+                    lambda: t_next,
+                )
+                y_ext = interp.evaluate(t_ext)
+                check_t = jnp.concatenate([sub_t, t_ext[None]])
+                check_y = jnp.concatenate([sub_y, y_ext[None]])
+                order = jnp.argsort(check_t)
+                check_t, check_y = check_t[order], check_y[order]
+                g_check = jax.vmap(model.switches)(check_y)  # (points, n_sw)
+                wrong = jnp.where(mask, g_check < 0, g_check > 0)
+                n_pts = check_t.shape[0]
+                first_pt = jnp.where(jnp.any(wrong, axis=0), jnp.argmax(wrong, axis=0), n_pts)
+                crossing = jnp.any(wrong)
+
+                # Only the walls crossed first on the check points can hold the earliest
+                # root (a later first point means a later root): locate only those.
+                first = first_pt == jnp.min(first_pt)
+
+                def root_of(i):
+                    pc = jnp.minimum(first_pt[i], n_pts - 1)
+                    a = jnp.where(first_pt[i] == 0, t, check_t[jnp.maximum(pc - 1, 0)])
+                    return _locate(
+                        lambda s: model.switches(interp.evaluate(s))[i], a, check_t[pc], active=first[i]
+                    )
+
+                roots = jax.lax.cond(
+                    crossing,
+                    lambda: jax.vmap(root_of)(jnp.arange(n_sw)),
+                    lambda: jnp.full(n_sw, jnp.inf, dtype),
+                )
+                roots = jnp.where((first_pt < n_pts) & first, roots, jnp.inf)
+                wall = jnp.argmin(roots)
+                t_star = jnp.where(crossing, roots[wall], t_next)
+                y_star = jnp.where(crossing, interp.evaluate(t_star), y1)
+                entering = ~mask[wall]
+                new_mask = jnp.where(crossing, mask.at[wall].set(entering), mask)
+                # With a kink at the observable's root, the piece ends there (before any
+                # later crossing, which the next piece finds again) and the sign flips.
+                # A kink too weak to matter (|Δf|·h far below the tolerance: a contact at
+                # rest, where v only rings at rounding level) does not end the piece: the
+                # step is kept and the next one takes the sign v has at its end. Ending a
+                # piece at every ring would double the steps of a long rest.
+                if kink:
+                    jump = jax.vmap(lambda z: rhs(t, z, mask, direction) - rhs(t, z, mask, -direction))(sub_y)
+                    kink_err = jnp.max(jnp.abs(jump) * h / scale)
+                    flip = has_ext & (t_ext < t_star) & (kink_err > _NEGLIGIBLE_KINK)
+                else:
+                    flip = jnp.array(False)
+                crossing = crossing & ~flip
+                t_end = jnp.where(flip, t_ext, t_star)
+                y_end = jnp.where(flip, y_ext, y_star)
+                new_mask = jnp.where(flip, mask, new_mask)
+                if kink:
+                    obs_end = model.observable(jnp.where(crossing, y_star, y1))
+                    sign_end = jnp.where(obs_end != 0, jnp.sign(obs_end), direction).astype(dtype)
+                    new_direction = jnp.where(flip, -direction, jnp.where(has_ext, sign_end, direction))
+                else:
+                    # The right-hand side ignores it, but a closed-form flight needs the
+                    # sign of the observable in the piece a crossing starts.
+                    obs_star = model.observable(y_star)
+                    new_direction = jnp.where(
+                        crossing & (obs_star != 0), jnp.sign(obs_star), direction
+                    ).astype(dtype)
+
+                # Refine the event time on the pair's own step (the dense output is less
+                # accurate than a step; Dopri8's much less): Newton on t ↦ g(step(t0 → t)),
+                # then the state from that step. An error made here would shift every
+                # later piece.
+                def at(tt):
+                    return _erk_step(solver_cls, piece_rhs, t, tt - t, y, c["f0"])[0]
+
+                def event_value(z):
+                    return jnp.where(flip, model.observable(z), model.switches(z)[wall])
+
+                t_ref, y_ref = _refine(at, piece_rhs, event_value, t_end, y_end, 1e-3 * h)
+                y_end = jnp.where(crossing | flip, y_ref, y1)
+                t_end = jnp.where(crossing | flip, t_ref, t_next)
+                # The region changed: restart FSAL with the new right-hand side.
+                f_end = rhs(t_end, y_end, new_mask, new_direction)
+                restart = crossing | flip | (new_direction != direction)
+                return dict(
+                    t_end=t_end,
+                    y_end=y_end,
+                    mask=new_mask,
+                    direction=new_direction,
+                    f0=jnp.where(restart, f_end, f1),
+                    # With a kink the extremum ends the piece: its refined time and state.
+                    ext=(
+                        flip | (has_ext & (t_ext < t_star)),
+                        jnp.where(flip, t_end, t_ext),
+                        jnp.where(flip, y_end, y_ext),
+                    ),
+                    # The refined crossing (the dense output's root can be far off on a long
+                    # step: the record must hold where the piece really ends).
+                    cross=(crossing, t_end, y_end, entering, wall),
+                )
+
+            out = _packed_cond(eventful, eventful_step, plain, dtype)
+            # Peak contact force on the sub-grid of this step (up to its end).
+            f_sub = jax.vmap(lambda yy: contact_force_abs(yy, mask))(sub_y)
+            f_max = jnp.max(jnp.where(sub_t <= out["t_end"], f_sub, 0.0))
+            return dict(
+                out,
+                accept=accept,
+                fail=~finite & (h <= 1e-14 * jnp.maximum(jnp.abs(t), 1.0)),
+                dt_new=dt_new,
+                h_used=jax.lax.stop_gradient(h),
+                f_max=f_max,
             )
-            roots = jnp.where((first_pt < n_pts) & first, roots, jnp.inf)
-            wall = jnp.argmin(roots)
-            t_star = jnp.where(crossing, roots[wall], t_next)
-            y_star = jnp.where(crossing, interp.evaluate(t_star), y1)
-            entering = ~mask[wall]
-            new_mask = jnp.where(crossing, mask.at[wall].set(entering), mask)
-            # With a kink at the observable's root, the piece ends there (before any
-            # later crossing, which the next piece finds again) and the sign flips.
-            # A kink too weak to matter (|Δf|·h far below the tolerance: a contact at
-            # rest, where v only rings at rounding level) does not end the piece: the
-            # step is kept and the next one takes the sign v has at its end. Ending a
-            # piece at every ring would double the steps of a long rest.
-            if kink:
-                jump = jax.vmap(lambda z: rhs(t, z, mask, direction) - rhs(t, z, mask, -direction))(sub_y)
-                kink_err = jnp.max(jnp.abs(jump) * h / scale)
-                flip = has_ext & (t_ext < t_star) & (kink_err > _NEGLIGIBLE_KINK)
-            else:
-                flip = jnp.array(False)
-            crossing = crossing & ~flip
-            t_end = jnp.where(flip, t_ext, t_star)
-            y_end = jnp.where(flip, y_ext, y_star)
-            new_mask = jnp.where(flip, mask, new_mask)
-            if kink:
-                obs_end = model.observable(jnp.where(crossing, y_star, y1))
-                sign_end = jnp.where(obs_end != 0, jnp.sign(obs_end), direction).astype(dtype)
-                new_direction = jnp.where(flip, -direction, jnp.where(has_ext, sign_end, direction))
-            else:
-                new_direction = direction
 
-            # Refine the event time on the pair's own step (the dense output is less
-            # accurate than a step; Dopri8's much less): Newton on t ↦ g(step(t0 → t)),
-            # then the state from that step. An error made here would shift every
-            # later piece.
-            def at(tt):
-                return _erk_step(solver_cls, piece_rhs, t, tt - t, y, c["f0"])[0]
-
-            def event_value(z):
-                return jnp.where(flip, model.observable(z), model.switches(z)[wall])
-
-            t_ref, y_ref = _refine(at, piece_rhs, event_value, t_end, y_end, 1e-3 * h)
-            y_end = jnp.where(crossing | flip, y_ref, y1)
-            t_end = jnp.where(crossing | flip, t_ref, t_next)
-            # The region changed: restart FSAL with the new right-hand side.
-            f_end = rhs(t_end, y_end, new_mask, new_direction)
-            restart = crossing | flip | (new_direction != direction)
+        def flight_piece():
+            # Free flight in closed form: the piece ends at the apex, at a wall, or at t1.
+            tau_apex, tau_walls, tau_max = model.flight_events(y, direction)
+            wall = jnp.argmin(tau_walls)
+            tau_wall = tau_walls[wall]
+            tau_event = jnp.minimum(tau_apex, tau_wall)
+            at_t1 = t1 - t <= jnp.minimum(tau_event, tau_max)
+            crossing = ~at_t1 & (tau_wall <= tau_apex) & (tau_wall <= tau_max)
+            apex = ~at_t1 & ~crossing & (tau_apex <= tau_max)
+            tau = jnp.where(at_t1, t1 - t, jnp.minimum(tau_event, tau_max))
+            t_end = jnp.where(at_t1, t1, t + tau)
+            y_end = model.flight_state(y, tau, direction)
+            new_mask = jnp.where(crossing, mask.at[wall].set(True), mask)
+            new_direction = jnp.where(apex, -direction, direction)
             return dict(
                 t_end=t_end,
                 y_end=y_end,
                 mask=new_mask,
                 direction=new_direction,
-                f0=jnp.where(restart, f_end, f1),
-                # With a kink the extremum ends the piece: its refined time and state.
-                ext=(
-                    flip | (has_ext & (t_ext < t_star)),
-                    jnp.where(flip, t_end, t_ext),
-                    jnp.where(flip, y_end, y_ext),
-                ),
-                # The refined crossing (the dense output's root can be far off on a long
-                # step: the record must hold where the piece really ends).
-                cross=(crossing, t_end, y_end, entering, wall),
+                f0=rhs(t_end, y_end, new_mask, new_direction),
+                ext=(apex, t_end, y_end),
+                cross=(crossing, t_end, y_end, jnp.array(True), wall),
+                accept=jnp.array(True),
+                fail=~(jnp.all(jnp.isfinite(y_end)) & jnp.isfinite(t_end)),
+                dt_new=c["dt"],
+                # The flight leaves the step sizes as they were.
+                h_used=c["dt_region"][0],
+                f_max=jnp.zeros((), dtype),
             )
 
-        out = _packed_cond(eventful, eventful_step, plain, dtype)
-        t_end = out["t_end"]
+        if closed_flight:
+            out = _packed_cond(~in_contact, flight_piece, rk_piece, dtype)
+        else:
+            out = rk_piece()
+        t_end, accept, h_used, dt_new = out["t_end"], out["accept"], out["h_used"], out["dt_new"]
 
         c = dict(c)
         c["n_steps"] = c["n_steps"] + 1
         c["n_accepted"] = c["n_accepted"] + jnp.where(accept, 1, 0)
         c["n_rejected"] = c["n_rejected"] + jnp.where(accept, 0, 1)
-        c["nonfinite"] = ~finite & (h <= 1e-14 * jnp.maximum(jnp.abs(t), 1.0))
+        c["nonfinite"] = out["fail"]
 
         # Record the accepted step's start, valid on [t, t_end].
         row = jnp.concatenate([jnp.stack([t, t_end, direction]), mask.astype(dtype), y])
@@ -517,10 +593,7 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         c = record_event(c, rec_ext, t_ext, y_ext, EXTREMUM, ext_wall, 0.0)
         seen = c["seen_extremum"] | (rec_ext & in_contact)
 
-        # Peak contact force on the sub-grid of this step (up to t_end).
-        f_sub = jax.vmap(lambda yy: contact_force_abs(yy, mask))(sub_y)
-        f_max = jnp.max(jnp.where(sub_t <= t_end, f_sub, 0.0))
-        peak = jnp.where(accept & in_contact, jnp.maximum(c["peak"], f_max), c["peak"])
+        peak = jnp.where(accept & in_contact, jnp.maximum(c["peak"], out["f_max"]), c["peak"])
 
         crossed, t_star, y_star, entering, wall = out["cross"]
         event = accept & crossed
@@ -539,7 +612,6 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         # about the new region: start from the last accepted step of its previous visit
         # (repeated bounces look alike: no rejections at each contact entry), or on a
         # first visit from min(dt_new, h), shrinking on rejection.
-        h_used = jax.lax.stop_gradient(h)
         dt_region = jnp.where(accept, c["dt_region"].at[_region_index(mask)].set(h_used), c["dt_region"])
         remembered = dt_region[_region_index(out["mask"])]
         first_visit = jnp.where(remembered < jnp.inf, remembered, jnp.minimum(dt_new, h_used))
@@ -558,10 +630,10 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
     # that holds each time (as accurate as a step, so the tolerance bounds the outputs
     # too; the dense interpolant is much less accurate inside Dopri8's long flight steps).
     rec = final["rec"]
-    t_ends = jnp.where(jnp.arange(max_steps) < final["n_accepted"], rec[:, 1], jnp.inf)
+    index = _first_at_or_after(rec[:, 1], final["n_accepted"], ts)
 
-    def evaluate(s):
-        row = rec[jnp.clip(jnp.searchsorted(t_ends, s, side="left"), 0, max_steps - 1)]
+    def evaluate(s, i):
+        row = rec[jnp.clip(i, 0, max_steps - 1)]
         t_start, direction = row[0], row[2]
         region_mask, y_start = row[_REC : _REC + n_sw] != 0, row[_REC + n_sw :]
 
@@ -570,10 +642,14 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
 
         f_start = piece_rhs(t_start, y_start)
         y = _erk_step(solver_cls, piece_rhs, t_start, s - t_start, y_start, f_start)[0]
+        if closed_flight:
+            in_flight = ~jnp.any(region_mask)
+            tau = jnp.where(in_flight, s - t_start, 0.0)
+            y = jnp.where(in_flight, model.flight_state(y_start, tau, direction), y)
         y = jnp.where(s == t0, y0, y)
         return {name: model.output(name, s, y) for name in outputs}
 
-    ys = jax.vmap(evaluate)(ts)
+    ys = jax.vmap(evaluate)(ts, index)
     reached = ts <= final["t"]
     ys = {k: jnp.where(reached, v, jnp.nan) for k, v in ys.items()}
     ev = final["ev"]

@@ -188,6 +188,7 @@ def simulate(
     max_events: int = 2048,
     dtmax: ArrayLike | None = None,
     piece_solver: str = "tsit5",
+    flight: str = "closed",
     ts: ArrayLike | None = None,
     samples: int = 1001,
     outputs: tuple[str, ...] = ("x", "v"),
@@ -211,6 +212,10 @@ def simulate(
     - `max_events`: the event mode's event buffer size.
     - `dtmax`: the event mode's largest step, s.
     - `piece_solver`: the event mode's Runge–Kutta pair, `"tsit5"` or `"dopri8"`.
+    - `flight`: the event mode's free flight: `"closed"` (default: the model's closed
+      form where it has one, e.g. the ball's tan/tanh solution with quadratic drag;
+      one loop iteration from a wall to the apex and one back) or `"integrated"`
+      (Runge–Kutta steps, as in contact).
     - `ts`: save times, s, sorted within [t0, t1]. Default: `samples` uniform
       times over [t0, t1], both ends included.
     - `outputs`: which outputs to save, from `model.output_names`
@@ -284,5 +289,6 @@ def simulate(
         max_events=max_events,
         dtmax=dtmax,
         piece_solver=piece_solver,
+        flight=flight,
     )
     return _solve(model, y0, t0, t1, ts, settings, outputs, bool(throw))

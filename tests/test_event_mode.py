@@ -412,3 +412,17 @@ def test_apex_height_gradient_vs_reference_finite_differences():
         fd = (ref_apex(p0 + e) - ref_apex(p0 - e)) / (2 * step)
         print(f"d apex / d p[{i}]: AD {grad[i]:.10e}, FD {fd:.10e}")
         assert abs(grad[i] - fd) <= 1e-5 * abs(fd)
+
+
+@pytest.mark.parametrize("n", [0, 1, 7, 100])
+def test_output_search_matches_numpy_searchsorted(n):
+    """The save times' step lookup searches the n filled rows only; it must agree with
+    numpy's searchsorted(side="left") on them (n where a time is beyond the last)."""
+    from jaxunilat._event import _first_at_or_after
+
+    rng = np.random.default_rng(n)
+    t_ends = np.zeros(128)
+    t_ends[:n] = np.sort(rng.uniform(0.0, 2.0, n))
+    ts = np.concatenate([np.linspace(0.0, 2.5, 301), t_ends[:n]])  # ties included
+    got = np.asarray(_first_at_or_after(jnp.asarray(t_ends), jnp.asarray(n), jnp.asarray(ts)))
+    np.testing.assert_array_equal(got, np.searchsorted(t_ends[:n], ts, side="left"))

@@ -177,3 +177,18 @@ def test_nonzero_t0_is_a_time_shift(ref_ex2):
     assert ts[0] == 1.0 and ts[-1] == 3.0
     x_ref, _ = ref_ex2(ts - 1.0)
     assert np.max(np.abs(arrays(sol, "x")[0] - x_ref)) <= 1e-5
+
+
+def test_settings_cache_reuses_validated_settings_and_still_validates():
+    from jaxunilat._solvers import make_settings
+
+    a = make_settings("event", 2.0, rtol=1e-9, atol=1e-9, piece_solver="dopri8")
+    b = make_settings("event", 2.0, rtol=1e-9, atol=1e-9, piece_solver="dopri8")
+    assert a is b  # plain numbers: built and validated once
+    assert make_settings("event", 2.0, rtol=1e-8, atol=1e-9) is not a
+    assert make_settings("event", 2.0, rtol=np.asarray([1e-9]), atol=1e-9) is not a  # arrays: rebuilt
+    for _ in range(2):  # an invalid value raises every time, cached or not
+        with pytest.raises(ValueError, match="rtol"):
+            make_settings("event", 2.0, rtol=-1.0, atol=1e-9)
+    # rk4's step budget depends on the span, so the span is part of the key.
+    assert make_settings("rk4", 1.0, dt=1e-3).max_steps != make_settings("rk4", 2.0, dt=1e-3).max_steps
