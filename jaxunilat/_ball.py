@@ -235,7 +235,9 @@ class Ball(AbstractModel):
             # below the resolution of x could not be located (nor could its exit).
             rise = apex_rise(v, self.gravity, self.drag)
             margin = (
-                _GRAZE_ULPS * jnp.finfo(x.dtype).eps * jnp.maximum(jnp.abs(self.upper), jnp.abs(x) + rise)
+                _GRAZE_ULPS
+                * jnp.finfo(x.dtype).eps
+                * jnp.maximum(jnp.abs(self.upper), jnp.abs(x) + jnp.where(rise < jnp.inf, rise, 0.0))
             )
             walls.append(
                 jnp.where(rising, rise_time(v, self.upper - x, self.gravity, self.drag, margin), inf)
