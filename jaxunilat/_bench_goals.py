@@ -124,9 +124,9 @@ def notes(result: dict, out: dict) -> dict:
         if not out[key]["met"]:
             notes[key] = (
                 f"missed: {cost}.{buffer} What would close it: a step buffer sized from the span and "
-                "tolerance (or grown on demand), closed-form free flight (tan/tanh with drag, so only the "
-                "~1.5 ms contacts need steps), a higher-order pair at tight tolerances, and a leaner "
-                "per-step body (fewer sub-grid crossing checks, no per-step buffer writes)."
+                "tolerance (or grown on demand), and, since the flight is in closed form and only the "
+                "~1.5 ms contacts take steps, a leaner per-step body for them (fewer sub-grid crossing "
+                "checks, no per-step buffer writes) or a custom CPU kernel per step."
             )
     if not out["P3"]["met"]:
         tp = max((r for r in result["throughput"] if not r["peer"]), key=lambda r: r["n"])
@@ -150,7 +150,7 @@ def notes(result: dict, out: dict) -> dict:
         notes["P3"] = (
             f"missed: {batched}vmap lockstep runs every row for the slowest row's {tp['steps_max']} steps "
             f"(mean {tp['steps_mean']:.0f}, factor {lock:.2f}), each vmapped step also writes "
-            f"per-row buffers (scatter); {cost}. What would close it: closed-form free flight, "
+            f"per-row buffers (scatter); {cost}. What would close it: "
             "sorting rows by expected step count into buckets, more devices (the sweep shards the "
             "batch: see scale_out)."
         )
@@ -160,7 +160,7 @@ def notes(result: dict, out: dict) -> dict:
             "so reverse mode stores each step's carry (O(max_steps) memory, 2048 here) and then runs the "
             "VJP of every step's full body (RK stages, dense interpolant, sub-grid checks, the root "
             "finders' Newton update) sequentially; the backward of the output evaluation runs one RK step per save "
-            "time and scatters into the step record. What would close it: fewer steps (closed-form free flight), a smaller step body, "
+            "time and scatters into the step record. What would close it: a smaller step body for the contact steps, "
             "or an adjoint per smooth segment (solve the adjoint ODE backwards with the jump conditions "
             "at the located events)."
         )
