@@ -9,7 +9,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike
 
 from ._contact import AbstractContactLaw, KelvinVoigt
-from ._flight import MAX_PHI, apex_rise, apex_time, fall_time, flight_state, rise_time
+from ._flight import apex_rise, apex_time, fall_time, flight_state, longest_fall, rise_time
 from ._heaviside import AbstractHeaviside, Exact
 from ._model import AbstractModel
 from ._validate import check_range
@@ -242,11 +242,7 @@ class Ball(AbstractModel):
             walls.append(
                 jnp.where(rising, rise_time(v, self.upper - x, self.gravity, self.drag, margin), inf)
             )
-        longest = inf
-        if self.drag is not None:
-            on = (self.drag > 0) & (self.gravity > 0)
-            rate = jnp.where(on, self.drag * self.gravity, 1.0)
-            longest = jnp.where(on & ~rising, MAX_PHI / rate, inf)
+        longest = jnp.where(rising, inf, longest_fall(self.gravity, self.drag))
         return apex, jnp.stack(walls), longest
 
     def energy(self, x: Array, v: Array) -> Array:

@@ -82,6 +82,15 @@ def flight_state(x0, v0, tau, g, k, rising):
     return jnp.where(on, x_drag, x_par), jnp.where(on, v_drag, v_par)
 
 
+def longest_fall(g, k):
+    """The longest falling piece, MAX_PHI/(g·k) s; inf without drag or gravity (the
+    parabola has no cosh to overflow)."""
+    on, gs, ks = _drag_terms(g, k)
+    if ks is None:
+        return jnp.full_like(jnp.asarray(g, float), jnp.inf)
+    return jnp.where(on, MAX_PHI / (gs * ks), jnp.inf)
+
+
 def apex_time(v0, g, k):
     """Time from v0 ≥ 0 to the apex (v = 0), s; inf without gravity."""
     on, gs, ks = _drag_terms(g, k)

@@ -98,6 +98,7 @@ class SolverSettings(eqx.Module):
 #: costs ~0.15 ms, a tenth of a short event-mode call (see `make_settings`).
 _CACHE: OrderedDict = OrderedDict()
 _CACHE_SIZE = 128
+_UNCACHED = object()
 
 
 def _plain(value):
@@ -109,9 +110,6 @@ def _plain(value):
     if isinstance(value, np.ndarray) and value.shape == () and value.dtype.kind in "iuf":
         return ("0d", value.dtype.str, float(value))
     return _UNCACHED
-
-
-_UNCACHED = object()
 
 
 def make_settings(method: str, span, **kwargs) -> SolverSettings:
