@@ -41,7 +41,7 @@ class Size:
     """What one benchmark size runs."""
 
     name: str
-    repeats: int
+    repeats: int  # the fewest timed runs after the warm-up
     slow_s: float  # a run slower than this is repeated only twice
     rk4_dts: tuple[float, ...]
     tsit5_tols: tuple[float, ...]
@@ -62,6 +62,11 @@ class Size:
     scale_out: bool = True  # the 1-device against 2-device subprocess
     identify_sets: int = 0  # bundled data sets to fit (the default one first)
     identify_runs: int = 1  # fits per data set (the first includes compilation)
+    # Fast calls are repeated beyond `repeats` until this much time is spent (at most
+    # `max_repeats` runs): on a shared VM single millisecond calls swing by 2x, and a
+    # median of 5 can land on either mode.
+    min_time_s: float = 0.25
+    max_repeats: int = 51
 
 
 _ALL_SCENES = ("drag on", "drag = 0", "drag None", "upper far", "upper None")
@@ -114,6 +119,8 @@ SIZES = {
         scale_n=200,
         skip_scenes=("drag = 0", "drag None"),
         error_checks=2,
+        min_time_s=0.1,
+        max_repeats=21,
     ),
     # Only for the test suite (hidden flag `--size tiny`): every section, smallest settings.
     "tiny": Size(
@@ -136,6 +143,7 @@ SIZES = {
         error_checks=1,
         gradient=False,  # tests/test_event_mode.py checks event-mode gradients against FD
         scale_out=False,  # tests/test_sweep.py runs the 2-device sweep
+        min_time_s=0.0,
     ),
 }
 
@@ -168,17 +176,39 @@ class Timing:
 
 
 def _timed(fn: Callable, size: Size) -> Timing:
-    """A warm-up call, then `size.repeats` runs (2 when the warm-up took over `size.slow_s`)."""
-    start = time.perf_counter()
-    out = fn()
-    first = time.perf_counter() - start
-    runs = size.repeats if first < size.slow_s else 2
-    walls = []
-    for _ in range(runs):
+    """A warm-up call, then at least `size.repeats` runs, more until `size.min_time_s`
+    is spent (at most `size.max_repeats`); 2 runs when the warm-up took over `size.slow_s`."""
+    return _timed_together([fn], size)[0]
+
+
+def _timed_together(fns: list[Callable], size: Size) -> list[Timing]:
+    """`_timed` for calls that are compared with each other (a gradient against its
+    forward): one warm-up each, then the runs alternate between them, so that a slow
+    spell of the machine falls on all of them alike."""
+    outs, firsts = [], []
+    for fn in fns:
         start = time.perf_counter()
-        out = fn()
-        walls.append(time.perf_counter() - start)
-    return Timing(out, first, statistics.median(walls), min(walls), runs)
+        outs.append(fn())
+        firsts.append(time.perf_counter() - start)
+    slow = max(firsts) >= size.slow_s
+    walls = [[] for _ in fns]
+    spent = 0.0
+    while True:
+        n = len(walls[0])
+        if n >= (2 if slow else size.max_repeats):
+            break
+        if n >= (2 if slow else size.repeats) and spent >= size.min_time_s:
+            break
+        for i, fn in enumerate(fns):
+            start = time.perf_counter()
+            outs[i] = fn()
+            wall = time.perf_counter() - start
+            walls[i].append(wall)
+            spent += wall
+    return [
+        Timing(out, first, statistics.median(w), min(w), len(w))
+        for out, first, w in zip(outs, firsts, walls, strict=True)
+    ]
 
 
 def _error(x, x_ref) -> float:
@@ -467,9 +497,9 @@ def _scale_out(size: Size, log) -> dict:
 GRAD_IMPACTS = 5
 
 
-def _loss(theta, weights, piece="tsit5"):
+def _loss(theta, weights, piece="tsit5", autodiff="reverse"):
     """weights · (trace loss mean x² [m²], sum of the first 5 impact times [s]) at θ = (κ, k_r),
-    event mode with `piece` ("tsit5" or "dopri8") pieces."""
+    event mode with `piece` ("tsit5" or "dopri8") pieces, differentiable in `autodiff` mode."""
     import jax.numpy as jnp
 
     from ._ball import Ball
@@ -483,6 +513,7 @@ def _loss(theta, weights, piece="tsit5"):
         T1,
         solver="event",
         piece_solver=piece,
+        autodiff=autodiff,
         rtol=TOL,
         atol=TOL,
         samples=SAMPLES,
@@ -509,18 +540,28 @@ def _gradient(size: Size, log) -> dict:
     out = {
         "scene": "example 2, [0, 2] s, event mode tol 1e-10, theta = (kappa, k_r)",
         # P4 is taken on the default pieces (Tsit5); other pieces' rows are beside them.
+        # Each loss has a row per mode: jax.grad on the default (checkpointed) loop, and
+        # jax.jacfwd with autodiff="forward" (a plain loop: one tangent per parameter).
         "losses": [],
     }
     for piece in size.gradient_pieces:
         key = "losses" if piece == size.gradient_pieces[0] else f"losses_{piece}"
         out.setdefault(key, [])
         loss = functools.partial(_loss, piece=piece)
-        fwd, grad = jax.jit(loss), jax.jit(jax.grad(loss))
+        fwd = jax.jit(loss)
+        grads = {
+            "reverse": jax.jit(jax.grad(loss)),
+            "forward": jax.jit(jax.jacfwd(functools.partial(_loss, piece=piece, autodiff="forward"))),
+        }
         for name, w in (("trace", (1.0, 0.0)), ("impact_times", (0.0, 1.0))):
             w = jnp.asarray(w)
-            f = _timed(lambda w=w, fwd=fwd: jax.block_until_ready(fwd(theta, w)), size)
-            gt = _timed(lambda w=w, grad=grad: jax.block_until_ready(grad(theta, w)), size)
-            out[key].append(_gradient_row(name, piece, f, gt))
+            timings = _timed_together(
+                [lambda w=w, fwd=fwd: jax.block_until_ready(fwd(theta, w))]
+                + [lambda w=w, g=g: jax.block_until_ready(g(theta, w)) for g in grads.values()],
+                size,
+            )
+            for mode, gt in zip(grads, timings[1:], strict=True):
+                out[key].append(_gradient_row(name, piece, timings[0], gt, mode))
     # Finite differences of the reference (central, relative step 1e-6).
     fd = np.zeros((2, 2))
     for i in range(2):
@@ -534,17 +575,19 @@ def _gradient(size: Size, log) -> dict:
         row["fd_reference"] = [float(v) for v in fd[j]]
         row["max_rel_error"] = float(np.max(np.abs(np.array(row["ad"]) - fd[j]) / np.abs(fd[j])))
         log(
-            f"  gradient of the {row['loss']} loss ({row['piece_solver']} pieces): {row['ratio']:.1f}x forward "
+            f"  gradient of the {row['loss']} loss ({row['piece_solver']} pieces, {row['mode']} mode): "
+            f"{row['ratio']:.1f}x forward "
             f"(forward {1e3 * row['forward_s']:.1f} ms, compile {row['gradient_compile_s']:.1f} s); "
             f"AD vs FD of the reference: max rel. error {row['max_rel_error']:.1e}"
         )
     return out
 
 
-def _gradient_row(name: str, piece: str, forward: Timing, gradient: Timing) -> dict:
+def _gradient_row(name: str, piece: str, forward: Timing, gradient: Timing, mode: str) -> dict:
     return {
         "loss": name,
         "piece_solver": piece,
+        "mode": mode,  # "reverse": jax.grad; "forward": jax.jacfwd with autodiff="forward"
         "forward_s": forward.median,
         "gradient_s": gradient.median,
         "ratio": gradient.median / forward.median,

@@ -6,9 +6,11 @@ Runge–Kutta pair (Tsit5, or Dopri8 for tight tolerances) and stops at every re
 boundary:
 
 1. One loop over steps (`equinox.internal.while_loop`, checkpointed with every step
-   a checkpoint, so it supports `jax.jit`, `jax.vmap` and reverse-mode `jax.grad`).
-   Each step uses diffrax's Butcher tableau with the stages unrolled, and diffrax's
-   dense interpolant; step-size control is an integral controller on the embedded
+   a checkpoint, so it supports `jax.jit`, `jax.vmap` and reverse-mode `jax.grad`;
+   with `autodiff="forward"` a plain loop, for `jax.jvp` and `jax.jacfwd`).
+   Each step uses diffrax's Butcher tableau with the stages unrolled, and the pair's
+   continuous extension (diffrax's interpolant, as a polynomial in θ collected once
+   per step: `_dense`); step-size control is an integral controller on the embedded
    error estimate.
 2. After each accepted step the switching functions g_i (signed distances into the
    walls) are checked on a sub-grid of the step's dense interpolant, and at the roots
@@ -42,6 +44,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
+
+from . import _dense
 
 #: Event kinds in `EventRecord.kind`.
 ENTRY, EXIT, EXTREMUM = 1, 2, 3
@@ -92,9 +96,9 @@ PIECE_SOLVERS = {"tsit5": (dfx.Tsit5, 1 / 5), "dopri8": (dfx.Dopri8, 1 / 8)}
 def _erk_step(solver_cls, f, t, h, y, f0):
     """One step of an FSAL explicit RK pair from diffrax's Butcher tableau, unrolled.
 
-    `f0` = f(t, y) (first same as last). Returns (y1, y_error, k, f1) where k holds
-    the stage increments hᵢ·fᵢ that the solver's diffrax interpolant expects, and
-    f1 = f(t + h, y1) is the next step's f0. Unrolling the stages lets XLA fuse the
+    `f0` = f(t, y) (first same as last). Returns (y1, y_error, k, f1) where k is the
+    tuple of stage increments hᵢ·fᵢ (the dense output's `_dense.coefficients` take
+    them), and f1 = f(t + h, y1) is the next step's f0. Unrolling the stages lets XLA fuse the
     step into a few kernels; diffrax's generic step loops over its stages.
     """
     tab = solver_cls.tableau
@@ -107,11 +111,7 @@ def _erk_step(solver_cls, f, t, h, y, f0):
     y1 = y + sum(float(b) * k for b, k in zip(tab.b_sol, ks, strict=True) if b != 0)
     y_err = sum(float(b) * k for b, k in zip(tab.b_error, ks, strict=True) if b != 0)
     # FSAL: the last stage is evaluated at (t + h, y1).
-    return y1, y_err, jnp.stack(ks), f_last
-
-
-def _interp(solver_cls, t0, t1, dense):
-    return solver_cls.interpolation_cls(t0=t0, t1=t1, **dense)
+    return y1, y_err, tuple(ks), f_last
 
 
 def _locate(f, a, b, positive_left=None, active=None):
@@ -383,7 +383,7 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
             t_next = jnp.where(t1 - (t + h) < 1e-12 * jnp.abs(t1), t1, t + h)
             h = t_next - t
             y1, y_err, k, f1 = _erk_step(solver_cls, piece_rhs, t, h, y, c["f0"])
-            dense = dict(y0=y, y1=y1, k=k)
+            coeffs = _dense.coefficients(solver_cls, k)
             scale = settings.atol + settings.rtol * jnp.maximum(jnp.abs(y), jnp.abs(y1))
             err = jnp.sqrt(jnp.mean((y_err / scale) ** 2))
             finite = jnp.all(jnp.abs(y1) < huge) & (err < jnp.inf)  # False for NaN too
@@ -392,9 +392,12 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
             factor = jnp.where(finite, factor, 0.2)
             dt_new = jax.lax.stop_gradient(h * factor)
 
-            interp = _interp(solver_cls, t, t_next, dense)
+            def dense(s):
+                # The pair's continuous extension on this step (`_dense`).
+                return _dense.evaluate(t, h, y, coeffs, s)
+
             sub_t = t + fractions * h
-            sub_y = jax.vmap(interp.evaluate)(sub_t)
+            sub_y = jax.vmap(dense)(sub_t)
             # Cheap tests on the sub-grid: a sign change of the observable (an extremum
             # inside the step) or a switching function on the wrong side (a crossing).
             obs_sub = jax.vmap(model.observable)(sub_y)
@@ -430,10 +433,10 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
                 )
                 t_ext = jax.lax.cond(
                     has_ext,
-                    lambda: _locate(lambda s: model.observable(interp.evaluate(s)), lo, sub_t[j], sign_left),
+                    lambda: _locate(lambda s: model.observable(dense(s)), lo, sub_t[j], sign_left),
                     lambda: t_next,
                 )
-                y_ext = interp.evaluate(t_ext)
+                y_ext = dense(t_ext)
                 check_t = jnp.concatenate([sub_t, t_ext[None]])
                 check_y = jnp.concatenate([sub_y, y_ext[None]])
                 order = jnp.argsort(check_t)
@@ -451,9 +454,7 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
                 def root_of(i):
                     pc = jnp.minimum(first_pt[i], n_pts - 1)
                     a = jnp.where(first_pt[i] == 0, t, check_t[jnp.maximum(pc - 1, 0)])
-                    return _locate(
-                        lambda s: model.switches(interp.evaluate(s))[i], a, check_t[pc], active=first[i]
-                    )
+                    return _locate(lambda s: model.switches(dense(s))[i], a, check_t[pc], active=first[i])
 
                 roots = jax.lax.cond(
                     crossing,
@@ -463,7 +464,7 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
                 roots = jnp.where((first_pt < n_pts) & first, roots, jnp.inf)
                 wall = jnp.argmin(roots)
                 t_star = jnp.where(crossing, roots[wall], t_next)
-                y_star = jnp.where(crossing, interp.evaluate(t_star), y1)
+                y_star = jnp.where(crossing, dense(t_star), y1)
                 entering = ~mask[wall]
                 new_mask = jnp.where(crossing, mask.at[wall].set(entering), mask)
                 # With a kink at the observable's root, the piece ends there (before any
@@ -622,9 +623,13 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
     buffers = lambda c: [c["rec"], c["ev"]]  # noqa: E731
     # The carry outside the buffers is a few dozen numbers, so every step can be a
     # checkpoint: reverse mode then recomputes nothing.
-    final = eqxi.while_loop(
-        cond, body, init, max_steps=max_steps, buffers=buffers, kind="checkpointed", checkpoints=max_steps
-    )
+    if settings.autodiff == "forward":
+        # A plain loop: forward mode (jax.jvp, jax.jacfwd) differentiates it as it runs.
+        final = eqxi.while_loop(cond, body, init, max_steps=max_steps, buffers=buffers, kind="lax")
+    else:
+        final = eqxi.while_loop(
+            cond, body, init, max_steps=max_steps, buffers=buffers, kind="checkpointed", checkpoints=max_steps
+        )
 
     # Outputs at the save times: the pair's own step from the start of the recorded step
     # that holds each time (as accurate as a step, so the tolerance bounds the outputs

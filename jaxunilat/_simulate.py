@@ -7,6 +7,7 @@ from collections import Counter
 
 import diffrax as dfx
 import equinox as eqx
+import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -98,11 +99,20 @@ class Solution(eqx.Module):
         return "; ".join(Status(c).name.lower() for c in codes)
 
 
+_FORWARD_ONLY = (
+    "jaxunilat.simulate: autodiff='forward' differentiates in forward mode only (jax.jvp, "
+    "jax.jacfwd); for jax.grad, jax.vjp or jax.jacrev pass autodiff='reverse' (the default)."
+)
+
+
 def _finish(ys, y1, status, settings, throw, ts, stats, events=None):
     if throw:
         ys = eqx.branched_error_if(
             ys, status != Status.SUCCESS, jnp.maximum(status - 1, 0), _messages(settings)
         )
+    if settings.autodiff == "forward":
+        # A clear error instead of JAX's about transposing a while loop.
+        ys, y1, events = eqxi.nondifferentiable_backward((ys, y1, events), msg=_FORWARD_ONLY)
     return Solution(
         ts=ts,
         ys=ys,
@@ -144,6 +154,7 @@ def _solve(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[str, 
         args=model,
         saveat=saveat,
         stepsize_controller=settings.controller(),
+        adjoint=settings.adjoint(),
         max_steps=settings.max_steps,
         throw=False,
     )
@@ -189,6 +200,7 @@ def simulate(
     dtmax: ArrayLike | None = None,
     piece_solver: str = "tsit5",
     flight: str = "closed",
+    autodiff: str = "reverse",
     ts: ArrayLike | None = None,
     samples: int = 1001,
     outputs: tuple[str, ...] = ("x", "v"),
@@ -216,6 +228,11 @@ def simulate(
       form where it has one, e.g. the ball's tan/tanh solution with quadratic drag;
       one loop iteration from a wall to the apex and one back) or `"integrated"`
       (Runge–Kutta steps, as in contact).
+    - `autodiff`: `"reverse"` (default: `jax.grad`, `jax.vjp`, `jax.jacrev`; the loop
+      is checkpointed at every step) or `"forward"` (`jax.jvp`, `jax.jacfwd`; a plain
+      loop, where reverse mode raises). For a few parameters forward mode is cheaper:
+      `jax.jacfwd` of an event-mode loss in (κ, k_r) costs about 2.5 forward solves
+      against 5–6 for `jax.grad`, and compiles in half the time (README, Performance).
     - `ts`: save times, s, sorted within [t0, t1]. Default: `samples` uniform
       times over [t0, t1], both ends included.
     - `outputs`: which outputs to save, from `model.output_names`
@@ -227,8 +244,9 @@ def simulate(
     **Returns:** a `Solution`.
 
     Changing only parameter values (model leaves, y0, t_span, ts, dt, rtol, atol)
-    does not retrace. Batch with `jax.vmap`, differentiate with `jax.grad`
-    (use a smooth Heaviside option for meaningful gradients of the penalty model).
+    does not retrace. Batch with `jax.vmap`, differentiate with `jax.grad` (or
+    `jax.jacfwd` with `autodiff="forward"`); use the event mode, or a smooth Heaviside
+    option, for meaningful gradients of the penalty model.
     """
     if not isinstance(model, AbstractModel):
         raise ValueError(f"model = {model!r} is not a jaxunilat model (e.g. Ball.table1(2))")
@@ -290,5 +308,6 @@ def simulate(
         dtmax=dtmax,
         piece_solver=piece_solver,
         flight=flight,
+        autodiff=autodiff,
     )
     return _solve(model, y0, t0, t1, ts, settings, outputs, bool(throw))

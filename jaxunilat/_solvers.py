@@ -45,6 +45,8 @@ class RK4(dfx.AbstractERK):
 
 
 SOLVERS = ("rk4", "tsit5", "event")
+#: The automatic differentiation modes a solve supports (`SolverSettings.autodiff`).
+AUTODIFF = ("reverse", "forward")
 
 
 class SolverSettings(eqx.Module):
@@ -70,6 +72,12 @@ class SolverSettings(eqx.Module):
     - `flight`: the event mode's free flight: `"closed"` (the model's closed form, where
       it has one: one loop iteration per half flight, exact to rounding) or
       `"integrated"` (steps of `piece_solver`, like the contacts). Static.
+    - `autodiff`: which automatic differentiation the solve supports. `"reverse"`
+      (default): `jax.grad`, `jax.vjp`, `jax.jacrev`, through a loop checkpointed at
+      every step. `"forward"`: `jax.jvp`, `jax.jacfwd`, through a plain loop (and
+      diffrax's `ForwardMode` for RK4 and Tsit5); reverse mode then raises. For a few
+      parameters forward mode is the cheaper one: one tangent per parameter rides
+      along with the solve. Static.
     """
 
     method: str = eqx.field(static=True)
@@ -84,6 +92,7 @@ class SolverSettings(eqx.Module):
     dtmax: Array | None = None
     piece_solver: str = eqx.field(static=True, default="tsit5")
     flight: str = eqx.field(static=True, default="closed")
+    autodiff: str = eqx.field(static=True, default="reverse")
 
     def diffrax_solver(self):
         return RK4() if self.method == "rk4" else dfx.Tsit5()
@@ -92,6 +101,10 @@ class SolverSettings(eqx.Module):
         if self.method == "rk4":
             return dfx.ConstantStepSize()
         return dfx.PIDController(rtol=self.rtol, atol=self.atol, pcoeff=self.pcoeff, icoeff=self.icoeff)
+
+    def adjoint(self):
+        """diffrax's differentiation of `diffeqsolve` (RK4, Tsit5) for `autodiff`."""
+        return dfx.ForwardMode() if self.autodiff == "forward" else dfx.RecursiveCheckpointAdjoint()
 
 
 #: Settings built from plain numbers, by their arguments: building an equinox Module
@@ -147,6 +160,7 @@ def _build_settings(
     dtmax=None,
     piece_solver: str = "tsit5",
     flight: str = "closed",
+    autodiff: str = "reverse",
 ) -> SolverSettings:
     """Validate the solver arguments and build `SolverSettings`."""
     check_choice("solver", method, SOLVERS)
@@ -170,6 +184,7 @@ def _build_settings(
             raise ValueError(f"{name} = {value!r} is out of range; valid range is integers >= {low}")
     check_choice("piece_solver", piece_solver, ("tsit5", "dopri8"))
     check_choice("flight", flight, ("closed", "integrated"))
+    check_choice("autodiff", autodiff, AUTODIFF)
     check_range("dtmax", dtmax, lo=0.0, lo_open=True, unit="s", allow_none=True)
     if method == "rk4" and is_concrete(dt) and is_concrete(span):
         needed = math.ceil(float(span) / float(np.min(np.asarray(dt))))
@@ -189,4 +204,5 @@ def _build_settings(
         dtmax=None if dtmax is None else as_float_array(dtmax),
         piece_solver=piece_solver,
         flight=flight,
+        autodiff=autodiff,
     )

@@ -148,6 +148,7 @@ def test_bad_model_inputs_raise_value_error(make, name):
         (dict(y0=((0.0, 1.0),)), "y0"),
         (dict(y0=(float("nan"), 1.0)), "y0"),
         (dict(rtol=0.0), "rtol"),
+        (dict(autodiff="adjoint"), "autodiff"),
     ],
 )
 def test_bad_simulate_inputs_raise_value_error(kwargs, name):
@@ -156,6 +157,26 @@ def test_bad_simulate_inputs_raise_value_error(kwargs, name):
     y0, t_span = args.pop("y0"), args.pop("t_span")
     with pytest.raises(ValueError, match=name):
         jaxunilat.simulate(jaxunilat.Ball.table1(2), y0, t_span, **args)
+
+
+@pytest.mark.parametrize("solver", ["tsit5", "event"])
+def test_forward_mode_gradient_equals_reverse_mode_and_reverse_is_refused_clearly(solver):
+    """autodiff="forward": jax.jacfwd gives what jax.grad gives on the default loop, and
+    reverse mode through it raises an error that says what to change. (The event mode's
+    forward mode is checked against finite differences in tests/test_event_mode.py.)"""
+
+    def loss(theta, autodiff):
+        ball = jaxunilat.Ball.table1(2, kappa=theta[0], k_r=theta[1])
+        kw = dict(rtol=1e-10, atol=1e-10, samples=51, outputs=("x",), autodiff=autodiff)
+        return jnp.sum(jaxunilat.simulate(ball, PAPER_Y0, 0.4, solver=solver, **kw).ys["x"])
+
+    theta = jnp.array([1.0e4, 0.2])
+    if solver == "tsit5":
+        reverse = np.asarray(jax.grad(loss)(theta, "reverse"))
+        forward = np.asarray(jax.jacfwd(loss)(theta, "forward"))
+        np.testing.assert_allclose(forward, reverse, rtol=1e-10)
+    with pytest.raises(RuntimeError, match="autodiff='reverse'"):
+        jax.grad(loss)(theta, "forward")
 
 
 def test_import_enables_float64():
