@@ -5,7 +5,8 @@ Every figure is measured in one process against peers timed in the same run (sci
 example 2 over [0, 2] s [K90 §5.1]. The error is max |Δx| at 2001 points against the
 benchmark's own reference (`_bench_peers.reference`: event-located DOP853 at rtol
 1e-13), itself checked against the drag-free closed form. Wall times are medians of
-repeated runs after a warm-up call; the warm-up's extra time is the compile time.
+repeated runs after a warm-up call (at least `Size.repeats`, more for fast calls until
+`Size.min_time_s` is spent); the warm-up's extra time is the compile time.
 
 `run_bench(size)` returns the `bench.json` dictionary; the `jaxunilat bench` command
 (`_cli_bench.py`) writes it with the figures (`_bench_plot.py`). The peers and the
