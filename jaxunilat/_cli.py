@@ -358,6 +358,10 @@ def _fail(message: str, code: int) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command line with `argv` (default: `sys.argv[1:]`); return the exit code."""
+    from ._loop_kernels import use_loop_kernels
+
+    # Before anything computes: the event mode's loops compile into single kernels.
+    use_loop_kernels()
     try:
         args = build_parser().parse_args(argv)
         return int(args.func(args))

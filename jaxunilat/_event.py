@@ -27,12 +27,16 @@ boundary:
    root of v unless the kink's effect over the step is negligible.
 
 Every event (entry, exit, apex, deepest point) is recorded in a fixed-size buffer,
-and every accepted step's start (time, state, region) in another. After the loop each
-output at a save time s is the pair's own step from the start of the recorded step
-that holds s, of length s − t_start: as accurate as a step, where the dense
-interpolant inside a long flight step is not (Dopri8 at tol 1e-10: 7.0e-10 m against
-1.5e-9 m over example 2), and a row of 3 + n_sw + n numbers instead of the
-interpolant's 3 + 15n.
+and the start (time, state, region) of every accepted step that holds a save time in
+another (at most one row per save time). After the loop each output at a save time s
+is the pair's own step from the start of the recorded step that holds s, of length
+s − t_start (or, in free flight, the model's closed form): as accurate as a step,
+where the dense interpolant inside a long flight step is not (Dopri8 at tol 1e-10:
+7.0e-10 m against 1.5e-9 m over example 2), and a row of 4 + n_sw + n numbers instead
+of the interpolant's 3 + 15n.
+
+Nothing in the loop body is a sort, a scatter or a host callback, so that XLA:CPU can
+compile the whole loop into one kernel (`jaxunilat.use_loop_kernels`).
 """
 
 from __future__ import annotations
@@ -57,7 +61,7 @@ _ITERATIONS = 12
 #: does not end a piece (see `event_solve`).
 _NEGLIGIBLE_KINK = 1e-3
 _REFINE_ITERATIONS = 2
-_REC = 3  # leading columns of a step record: t0, t_end, direction (then mask, y0)
+_REC = 4  # leading columns of a step record: t0, t_end, direction, first save time (then mask, y0)
 _EV = 4  # leading columns of an event record: t, kind, wall, peak force
 
 
@@ -209,18 +213,18 @@ def _refine(state_at, rate, value_of, t_root, y_root, radius):
     return tt + delta, z + rate(tt, jax.lax.stop_gradient(z)) * delta
 
 
-def _first_at_or_after(t_ends, n, ts):
-    """For each time in `ts`: the index of the first of `t_ends[:n]` (sorted) that is
-    ≥ it, or n if none. A binary search over the n filled rows only, so it takes
-    ⌈log2(n + 1)⌉ iterations (about 7 for 100 steps) where `jnp.searchsorted` over the
-    whole buffer takes log2(max_steps) (14 for the default 16 384)."""
+def _first_at_or_after(t_ends, n, ts, strict=False):
+    """For each time in `ts` (an array, or one time): the index of the first of
+    `t_ends[:n]` (sorted) that is ≥ it (> it with `strict`), or n if none: a binary
+    search over the n filled entries only, ⌈log2(n + 1)⌉ iterations."""
     t_ends = jax.lax.stop_gradient(t_ends)
     ts = jax.lax.stop_gradient(ts)
 
     def body(state):
         lo, hi = state
         mid = (lo + hi) // 2
-        right = (lo < hi) & (t_ends[jnp.minimum(mid, t_ends.shape[0] - 1)] < ts)
+        value = t_ends[jnp.minimum(mid, t_ends.shape[0] - 1)]
+        right = (lo < hi) & ((value <= ts) if strict else (value < ts))
         return jnp.where(right, mid + 1, lo), jnp.where(right, hi, mid)
 
     lo = jnp.zeros(ts.shape, n.dtype)
@@ -281,6 +285,9 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
     n_sw = model.num_switches
     max_steps = settings.max_steps
     max_events = settings.max_events
+    n_ts = ts.shape[0]
+    # Each save time is in one recorded step, so the steps that hold one fit in n_ts rows.
+    rows = min(max_steps, n_ts)
     fractions = jnp.linspace(0.0, 1.0, settings.subgrid + 1)[1:]
     dtype = y0.dtype
 
@@ -351,9 +358,13 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         n_events=jnp.where(start_in_contact, 1, 0),
         overflow=jnp.array(False),
         nonfinite=jnp.array(False),
-        # One row per accepted step: [t0, t_end, direction, mask (n_sw), y0 (n)], enough
-        # to take the piece's step from t0 to any time in [t0, t_end] (unused rows: zeros).
-        rec=jnp.zeros((max_steps, _REC + n_sw + n), dtype),
+        # One row per accepted step that holds a save time (at most one per save time):
+        # [t0, t_end, direction, index of its first save time, mask (n_sw), y0 (n)],
+        # enough to take the piece's step from t0 to any time in [t0, t_end] (unused
+        # rows: zeros); `saved` save times lie at or before the last recorded step's end.
+        rec=jnp.zeros((rows, _REC + n_sw + n), dtype),
+        n_rec=jnp.array(0),
+        saved=jnp.array(0),
         # One row per event: [t, kind, wall, peak force, y (n)]; a contact open at t0
         # is recorded as an entry at t0.
         ev=jnp.where(
@@ -447,10 +458,15 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
                     lambda: t_next,
                 )
                 y_ext = dense(t_ext)
-                check_t = jnp.concatenate([sub_t, t_ext[None]])
-                check_y = jnp.concatenate([sub_y, y_ext[None]])
-                order = jnp.argsort(check_t)
-                check_t, check_y = check_t[order], check_y[order]
+                # The sub-grid (sorted) with the extremum inserted in time order (after
+                # sub-grid points at the same time): a gather, where a sort would keep
+                # XLA:CPU from compiling the loop as one kernel.
+                slot = jnp.sum(sub_t <= t_ext)
+                pos = jnp.arange(sub_t.shape[0] + 1)
+                from_sub = jnp.clip(jnp.where(pos < slot, pos, pos - 1), 0, sub_t.shape[0] - 1)
+                is_ext = pos == slot
+                check_t = jnp.where(is_ext, t_ext, sub_t[from_sub])
+                check_y = jnp.where(is_ext[:, None], y_ext, sub_y[from_sub])
                 g_check = jax.vmap(model.switches)(check_y)  # (points, n_sw)
                 wrong = jnp.where(mask, g_check < 0, g_check > 0)
                 n_pts = check_t.shape[0]
@@ -593,9 +609,15 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         c["n_rejected"] = c["n_rejected"] + jnp.where(accept, 0, 1)
         c["nonfinite"] = out["fail"]
 
-        # Record the accepted step's start, valid on [t, t_end].
-        row = jnp.concatenate([jnp.stack([t, t_end, direction]), mask.astype(dtype), y])
-        c["rec"] = eqxi.buffer_at_set(c["rec"], c["n_accepted"] - 1, row, pred=accept)
+        # Record the accepted step's start, valid on [t, t_end], if a save time lies in it.
+        holds = accept & (c["saved"] < n_ts) & (ts[jnp.minimum(c["saved"], n_ts - 1)] <= t_end)
+        first = c["saved"].astype(dtype)
+        row = jnp.concatenate([jnp.stack([t, t_end, direction, first]), mask.astype(dtype), y])
+        c["rec"] = eqxi.buffer_at_set(c["rec"], c["n_rec"], row, pred=holds & (c["n_rec"] < rows))
+        c["n_rec"] = c["n_rec"] + jnp.where(holds, 1, 0)
+        c["saved"] = jnp.where(
+            holds, _first_at_or_after(ts, jnp.asarray(n_ts), t_end, strict=True), c["saved"]
+        )
 
         # An apex in every flight; the first deepest point in each contact.
         ext_pred, t_ext, y_ext = out["ext"]
@@ -644,27 +666,53 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
     # Outputs at the save times: the pair's own step from the start of the recorded step
     # that holds each time (as accurate as a step, so the tolerance bounds the outputs
     # too; the dense interpolant is much less accurate inside Dopri8's long flight steps).
-    rec = final["rec"]
-    index = _first_at_or_after(rec[:, 1], final["n_accepted"], ts)
+    # Each save time's step: the recorded rows hold consecutive runs of save times, so
+    # marking where each run starts and counting the marks gives every time its row.
+    rec = jax.lax.stop_gradient(final["rec"])
+    starts = rec[1:, 3].astype(jnp.int32)
+    later = jnp.arange(1, rows) < final["n_rec"]
+    marks = jnp.zeros(n_ts, jnp.int32).at[jnp.where(later, starts, n_ts)].add(1, mode="drop")
+    index = jnp.cumsum(marks)
+    held = final["rec"][index]
+    t_start, direction = held[:, 0], held[:, 2]
+    masks, y_start = held[:, _REC : _REC + n_sw] != 0, held[:, _REC + n_sw :]
 
-    def evaluate(s, i):
-        row = rec[jnp.clip(i, 0, max_steps - 1)]
-        t_start, direction = row[0], row[2]
-        region_mask, y_start = row[_REC : _REC + n_sw] != 0, row[_REC + n_sw :]
-
+    def step_to(s, t_st, sign, mask, y_st):
         def piece_rhs(tt, z):
-            return rhs(tt, z, region_mask, direction)
+            return rhs(tt, z, mask, sign)
 
-        f_start = piece_rhs(t_start, y_start)
-        y = _erk_step(solver_cls, piece_rhs, t_start, s - t_start, y_start, f_start)[0]
-        if closed_flight:
-            in_flight = ~jnp.any(region_mask)
-            tau = jnp.where(in_flight, s - t_start, 0.0)
-            y = jnp.where(in_flight, model.flight_state(y_start, tau, direction), y)
-        y = jnp.where(s == t0, y0, y)
-        return {name: model.output(name, s, y) for name in outputs}
+        return _erk_step(solver_cls, piece_rhs, t_st, s - t_st, y_st, piece_rhs(t_st, y_st))[0]
 
-    ys = jax.vmap(evaluate)(ts, index)
+    if closed_flight:
+        # Most save times fall in free flight (the contacts last milliseconds): the
+        # closed form there, and a step of the pair only at the times in contact, taken
+        # in chunks of `few` of them (a chunk with none is skipped).
+        in_flight = ~jnp.any(masks, axis=1)
+        tau = jnp.where(in_flight, ts - t_start, 0.0)
+        y_flight = jax.vmap(model.flight_state)(y_start, tau, direction)
+        few = min(n_ts, 64)
+        chunks = -(-n_ts // few)
+        # The times in contact in order (padding: n_ts, out of range), and each one's rank.
+        contact = ~in_flight
+        count = jnp.cumsum(contact)
+        order = jnp.full(chunks * few, n_ts)
+        order = order.at[jnp.where(contact, count - 1, n_ts)].set(jnp.arange(n_ts), mode="drop")
+
+        def chunk(_, idx):
+            def work():
+                i = jnp.minimum(idx, n_ts - 1)
+                return jax.vmap(step_to)(ts[i], t_start[i], direction[i], masks[i], y_start[i])
+
+            return None, jax.lax.cond(idx[0] < n_ts, work, lambda: jnp.zeros((few, n), dtype))
+
+        # The scan's body writes no scatter, so that it compiles into one kernel; each
+        # time in contact then reads its result by its rank.
+        y_contact = jax.lax.scan(chunk, None, order.reshape(chunks, few))[1].reshape(-1, n)
+        y = jnp.where(in_flight[:, None], y_flight, y_contact[jnp.clip(count - 1, 0, chunks * few - 1)])
+    else:
+        y = jax.vmap(step_to)(ts, t_start, direction, masks, y_start)
+    y = jnp.where((ts == t0)[:, None], y0, y)
+    ys = {name: jax.vmap(lambda s, z, name=name: model.output(name, s, z))(ts, y) for name in outputs}
     reached = ts <= final["t"]
     ys = {k: jnp.where(reached, v, jnp.nan) for k, v in ys.items()}
     ev = final["ev"]

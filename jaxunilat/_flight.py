@@ -16,7 +16,7 @@ closed form (φ = g·k·τ, τ the time since the piece's start, s):
   x = x0 − ln(cosh φ + a·sinh φ) / (g·k²).
 
 The logarithms are written as log1p of terms of one sign (−2 sin²(φ/2) + b·sin φ,
-2 sinh²(φ/2) + a·sinh φ), so that small k loses no digits: as k → 0 they tend to the
+cosh φ − 1 + a·sinh φ from e = expm1(φ)), so that small k loses no digits: as k → 0 they tend to the
 parabola x0 + v0·τ − g·τ²/2, which is used where k·g = 0 (no drag, or no gravity).
 The times to reach a height are the roots of the same expressions, rationalised so
 that no two nearly equal numbers are subtracted. Everything is plain `jax.numpy`, so
@@ -60,9 +60,11 @@ def flight_state(x0, v0, tau, g, k, rising):
     phi = gs * ks * tau
     scale = 1.0 / (gs * ks * ks)
     # Each half gets a safe φ where it is not used (0), so that neither its values nor
-    # its derivatives overflow in the branch `where` discards. Written with the half
-    # angle only (sin φ = 2sc, cos φ = 1 − 2s², likewise for sinh/cosh) and one log1p:
-    # three transcendental functions per evaluation for both halves.
+    # its derivatives overflow in the branch `where` discards. Rising: the half angle
+    # (sin φ = 2sc, cos φ = 1 − 2s²). Falling: everything from e = expm1(φ), with
+    # cosh φ − 1 = e²/(2(1 + e)) and sinh φ = e(2 + e)/(2(1 + e)), sums of terms of one
+    # sign (no cancellation at small φ), and expm1 is several times cheaper than sinh.
+    # One log1p serves both halves: three transcendental functions per evaluation.
     phi_up = jnp.where(rising, phi, 0.0)  # < atan(b) < π/2 in a rising piece
     phi_down = jnp.where(rising, 0.0, jnp.minimum(phi, MAX_PHI))
     b = ks * v0
@@ -70,13 +72,15 @@ def flight_state(x0, v0, tau, g, k, rising):
     sin_up, cos_up = 2.0 * s * jnp.sqrt(1.0 - s * s), 1.0 - 2.0 * s * s
     w0 = -v0
     a = ks * w0
-    sh = jnp.sinh(0.5 * phi_down)
-    sinh_down, cosh_down = 2.0 * sh * jnp.sqrt(1.0 + sh * sh), 1.0 + 2.0 * sh * sh
+    e = jnp.expm1(phi_down)
+    half = 0.5 / (1.0 + e)
+    cosh_m1, sinh_down = e * e * half, e * (2.0 + e) * half
     # Rising: x = x0 + ln(cos φ + b sin φ)/(g k²), v = (v0 cos φ − sin φ/k)/(cos φ + b sin φ).
     # Falling: x = x0 − ln(cosh φ + a sinh φ)/(g k²), v = −(w0 cosh φ + sinh φ/k)/(cosh φ + a sinh φ).
-    log_arg = jnp.where(rising, b * sin_up - 2.0 * s * s, a * sinh_down + 2.0 * sh * sh)
+    log_arg = jnp.where(rising, b * sin_up - 2.0 * s * s, cosh_m1 + a * sinh_down)
     x_drag = x0 + jnp.where(rising, scale, -scale) * jnp.log1p(log_arg)
     v_up = (v0 * cos_up - sin_up / ks) / (cos_up + b * sin_up)
+    cosh_down = 1.0 + cosh_m1
     v_down = -(w0 * cosh_down + sinh_down / ks) / (cosh_down + a * sinh_down)
     v_drag = jnp.where(rising, v_up, v_down)
     return jnp.where(on, x_drag, x_par), jnp.where(on, v_drag, v_par)

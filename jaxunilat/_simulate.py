@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import enum
-from collections import Counter
+import re
+from collections import Counter, OrderedDict
 
 import diffrax as dfx
 import equinox as eqx
@@ -125,8 +126,7 @@ def _finish(ys, y1, status, settings, throw, ts, stats, events=None):
     )
 
 
-@eqx.filter_jit
-def _solve(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[str, ...], throw: bool):
+def _solve_impl(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[str, ...], throw: bool):
     _TRACES["simulate"] += 1
     if settings.method == "event":
         ys, y1, done, nonfinite, overflow, stats, events = event_solve(
@@ -170,6 +170,50 @@ def _solve(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[str, 
         jnp.where(steps, Status.MAX_STEPS, jnp.where(finite, Status.SOLVER_FAILED, Status.NONFINITE)),
     ).astype(jnp.int32)
     return _finish(ys, y1, status, settings, throw, ts, sol.stats)
+
+
+#: The compiled solve. Plain `jax.jit` (every leaf of a model or of the settings is an
+#: array; structure is in their static fields): its C++ dispatch costs ~80 µs less per
+#: call than `equinox.filter_jit`, a fifth of a short event-mode call.
+_solve = jax.jit(_solve_impl, static_argnames=("outputs", "throw"))
+
+
+def _run(model, y0, t0, t1, ts, settings, outputs, throw):
+    """Call `_solve`; with `throw`, wait for the result and turn a solver failure into
+    an `equinox.EquinoxRuntimeError` that carries only our message (JAX's own error
+    wraps it in a host callback's traceback)."""
+    try:
+        sol = _solve(model, y0, t0, t1, ts, settings, outputs, throw)
+        if throw and not isinstance(sol.status, jax.core.Tracer):
+            sol.status.block_until_ready()
+    except jax.errors.JaxRuntimeError as err:
+        found = re.search(r"_EquinoxRuntimeError: (.+)", str(err))
+        if found is None:
+            raise
+        raise eqx.EquinoxRuntimeError(found.group(1).strip()) from None
+    return sol
+
+
+#: Default save times on the device, by (t0, t1, samples): building them with NumPy and
+#: copying them to the device costs ~50 µs per call.
+_TIMES: OrderedDict = OrderedDict()
+_TIMES_SIZE = 64
+
+
+def _default_times(t0, t1, samples: int):
+    """(t0, t1, `samples` uniform save times over [t0, t1]) as device arrays."""
+    if not (is_concrete(t0) and is_concrete(t1)):
+        return t0, t1, jnp.linspace(t0, t1, samples)
+    key = (float(t0), float(t1), samples)
+    hit = _TIMES.get(key)
+    if hit is None:
+        hit = tuple(jax.device_put(a) for a in (t0, t1, np.linspace(key[0], key[1], samples)))
+        _TIMES[key] = hit
+        if len(_TIMES) > _TIMES_SIZE:
+            _TIMES.popitem(last=False)
+    else:
+        _TIMES.move_to_end(key)
+    return hit
 
 
 def _time_span(t_span):
@@ -274,10 +318,7 @@ def simulate(
     if ts is None:
         if not isinstance(samples, (int, np.integer)) or samples < 2:
             raise ValueError(f"samples = {samples!r} is out of range; valid range is integers >= 2")
-        if is_concrete(t0) and is_concrete(t1):
-            ts = np.linspace(float(t0), float(t1), int(samples))
-        else:
-            ts = jnp.linspace(t0, t1, int(samples))
+        t0, t1, ts = _default_times(t0, t1, int(samples))
     else:
         ts = as_float_array(ts)
         if ts.ndim != 1 or ts.shape[0] < 1:
@@ -310,4 +351,4 @@ def simulate(
         flight=flight,
         autodiff=autodiff,
     )
-    return _solve(model, y0, t0, t1, ts, settings, outputs, bool(throw))
+    return _run(model, y0, t0, t1, ts, settings, outputs, bool(throw))

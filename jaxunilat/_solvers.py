@@ -9,6 +9,7 @@ from typing import ClassVar
 
 import diffrax as dfx
 import equinox as eqx
+import jax
 import numpy as np
 from jaxtyping import Array
 
@@ -138,7 +139,8 @@ def make_settings(method: str, span, **kwargs) -> SolverSettings:
     key = (method, span_key, parts)
     settings = _CACHE.get(key)
     if settings is None:
-        settings = _build_settings(method, span, **kwargs)
+        # Its arrays on the device once, not copied there on every call.
+        settings = jax.tree_util.tree_map(jax.device_put, _build_settings(method, span, **kwargs))
         _CACHE[key] = settings
         if len(_CACHE) > _CACHE_SIZE:
             _CACHE.popitem(last=False)

@@ -62,7 +62,9 @@ def _program(fn: Callable, axes: tuple[int | None, ...], devices: tuple, batch_s
                 it = iter(row)
                 return fn(*(next(it) if axis == 0 else a for a, axis in zip(args, axes, strict=True)))
 
-            return jax.lax.map(one, rows, batch_size=batch_size)
+            # One row at a time: no vmap at all (a vmap of one row would still batch
+            # the loops' predicates).
+            return jax.lax.map(one, rows, batch_size=None if batch_size == 1 else batch_size)
 
         def body(*args):
             _TRACES["sweep"] += 1
@@ -151,7 +153,11 @@ def sweep(
       host's devices after `jax.distributed.initialize()`).
     - `batch_size`: `None` vmaps all of a device's rows at once; an integer runs them
       in chunks of that many vmapped rows (`lax.map`), which bounds memory for large
-      batches (a vmapped while loop holds every row's buffers).
+      batches (a vmapped while loop holds every row's buffers). `1` runs the rows one
+      after another, unbatched: each row's loop stops at its own last step (no
+      lockstep behind the slowest row) and, after `use_loop_kernels()`, compiles into
+      one CPU kernel. On a CPU that is the fastest for event-mode sweeps (README,
+      Performance); on a GPU, vmap.
 
     **Returns:** `fn`'s outputs stacked along a leading batch axis of the input's
     length. The batch is padded to a multiple of the device count with copies of its

@@ -15,6 +15,10 @@ from reference import BallParams, scipy_reference  # noqa: E402
 
 import jaxunilat  # noqa: E402
 
+# As the command line does: the suite tests the configuration users run (and compiles
+# faster). tests/test_loop_kernels.py checks the default configuration against it.
+jaxunilat.use_loop_kernels()
+
 
 @pytest.fixture(scope="session")
 def ref_ex2():
