@@ -208,6 +208,8 @@ def _default_times(t0, t1, samples: int):
     hit = _TIMES.get(key)
     if hit is None:
         hit = tuple(jax.device_put(a) for a in (t0, t1, np.linspace(key[0], key[1], samples)))
+        if any(isinstance(a, jax.core.Tracer) for a in hit):
+            return hit  # inside a transformation (jit, vmap): this trace's values, not for later
         _TIMES[key] = hit
         if len(_TIMES) > _TIMES_SIZE:
             _TIMES.popitem(last=False)

@@ -139,8 +139,13 @@ def make_settings(method: str, span, **kwargs) -> SolverSettings:
     key = (method, span_key, parts)
     settings = _CACHE.get(key)
     if settings is None:
-        # Its arrays on the device once, not copied there on every call.
-        settings = jax.tree_util.tree_map(jax.device_put, _build_settings(method, span, **kwargs))
+        settings = _build_settings(method, span, **kwargs)
+        # Its arrays on the device once, not copied there on every call (inside a
+        # transformation device_put gives this trace's values: those are not kept).
+        placed = jax.tree_util.tree_map(jax.device_put, settings)
+        if any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(placed)):
+            return settings
+        settings = placed
         _CACHE[key] = settings
         if len(_CACHE) > _CACHE_SIZE:
             _CACHE.popitem(last=False)

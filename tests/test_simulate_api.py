@@ -213,3 +213,21 @@ def test_settings_cache_reuses_validated_settings_and_still_validates():
             make_settings("event", 2.0, rtol=-1.0, atol=1e-9)
     # rk4's step budget depends on the span, so the span is part of the key.
     assert make_settings("rk4", 1.0, dt=1e-3).max_steps != make_settings("rk4", 2.0, dt=1e-3).max_steps
+
+
+def test_caches_filled_inside_a_transformation_keep_no_tracer():
+    """Settings and default save times are cached on the device; a first call inside
+    `jax.jit` (new tolerance, new span) must not leave that trace's values in the caches:
+    later calls, plain or in another transformation, give the same numbers."""
+    ball = jaxunilat.Ball.table1(3)
+    kw = dict(solver="event", rtol=3.7e-9, atol=3.7e-9, samples=37, outputs=("x",))
+
+    @jax.jit
+    def inside(kappa):
+        return jaxunilat.simulate(jaxunilat.Ball.table1(3, kappa=kappa), PAPER_Y0, 0.731, **kw).ys["x"]
+
+    first = np.asarray(inside(1e4))
+    plain = np.asarray(jaxunilat.simulate(ball, PAPER_Y0, 0.731, **kw).ys["x"])
+    again = np.asarray(jax.vmap(inside)(jnp.array([1e4, 1e4]))[1])
+    np.testing.assert_allclose(plain, first, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(again, first, rtol=0, atol=1e-11)  # vmap: rounding differs
