@@ -33,7 +33,7 @@ from collections.abc import Callable
 import numpy as np
 
 from . import _bench_peers as peers
-from ._bench_goals import P3_ERROR, SMALL_BUFFER, goal_table as goal_table, goals
+from ._bench_goals import P3_ERROR, goal_table as goal_table, goals
 from ._bench_scale import SAMPLES, T1, Y0
 
 
@@ -49,7 +49,6 @@ class Size:
     smooth: tuple[tuple[str, float], ...]
     event_tols: tuple[float, ...]
     dopri8_tols: tuple[float, ...]
-    small_buffer_tols: tuple[float, ...]  # the event mode with max_steps = SMALL_BUFFER
     peer_event_tols: dict
     peer_plain_tols: dict
     numpy_dts: tuple[float, ...]
@@ -81,7 +80,6 @@ SIZES = {
         smooth=(("logistic", 1e-4), ("logistic", 1e-5), ("softplus", 1e-4), ("softplus", 1e-5)),
         event_tols=(1e-4, 1e-6, 1e-8, 1e-10, 1e-12),
         dopri8_tols=(1e-6, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12),
-        small_buffer_tols=(1e-6, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12),
         peer_event_tols={
             "RK45": (1e-4, 1e-6, 1e-8, 1e-10),
             "DOP853": (1e-4, 1e-6, 1e-8, 1e-10, 1e-12),
@@ -110,8 +108,7 @@ SIZES = {
         tsit5_tols=(1e-6, 1e-8, 1e-10),
         smooth=(("logistic", 1e-5),),
         event_tols=(1e-6, 1e-8, 1e-10, 1e-12),
-        dopri8_tols=(),
-        small_buffer_tols=(1e-8, 1e-9, 1e-11),
+        dopri8_tols=(1e-8, 1e-9, 1e-11),
         peer_event_tols={"RK45": (1e-6, 1e-8), "DOP853": (1e-6, 1e-8, 1e-10, 1e-12), "LSODA": (1e-8,)},
         peer_plain_tols={"DOP853": (1e-8,), "LSODA": (1e-8,)},
         numpy_dts=(1e-4, 1e-5),
@@ -133,7 +130,6 @@ SIZES = {
         smooth=(),
         event_tols=(1e-6, 1e-10, 1e-12),
         dopri8_tols=(),
-        small_buffer_tols=(),
         peer_event_tols={"DOP853": (1e-8, 1e-12)},
         peer_plain_tols={"LSODA": (1e-8,)},
         numpy_dts=(1e-4,),
@@ -221,6 +217,8 @@ def machine() -> dict:
     """The machine and software the figures were taken on."""
     import jax
 
+    from ._loop_kernels import loop_kernel_bytes
+
     return {
         "date_utc": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M"),
         "platform": platform.platform(),
@@ -230,6 +228,9 @@ def machine() -> dict:
         "jax": jax.__version__,
         "backend": jax.default_backend(),
         "devices": [str(d) for d in jax.devices()],
+        # XLA:CPU compiles loops touching fewer bytes per iteration into one kernel
+        # (`use_loop_kernels`, which the command line calls); None: XLA's default (1 KiB).
+        "loop_kernel_bytes": loop_kernel_bytes(),
     }
 
 
@@ -285,12 +286,6 @@ def _project_rows(size: Size, ts, x_ref, log) -> tuple[list[dict], dict]:
         for tol in tols:
             kw = dict(solver="event", piece_solver=piece, rtol=tol, atol=tol, **common)
             configs.append((f"event ({piece})", f"tol {tol:g}", f"event {piece}", ball, kw))
-    for tol in size.small_buffer_tols:
-        # Dopri8 pieces with a step buffer sized for this scene (the default is 16 384
-        # steps): the buffers are initialised and searched on every call.
-        kw = dict(solver="event", piece_solver="dopri8", rtol=tol, atol=tol, max_steps=SMALL_BUFFER, **common)
-        configs.append((f"event (dopri8), max_steps {SMALL_BUFFER}", f"tol {tol:g}", "event small", ball, kw))
-
     rows, compiled = [], {}
     for method, setting, key, model, kw in configs:
 
@@ -405,32 +400,43 @@ def per_step_fit(rows: list[dict], method: str = "event (tsit5)") -> dict | None
 
 
 def _throughput(size: Size, wp_rows, log) -> tuple[list[dict], dict]:
-    from ._bench_scale import PIECE, TOL, run_sweep
+    from ._bench_scale import PIECE, TOL, one_by_one_fastest, run_sweep, strategy
 
     rows, checks = [], {}
+    # The platform's fastest strategy first (its largest batch is checked against the
+    # reference); on a CPU with loop kernels the vmapped one beside it, for comparison.
+    fastest = one_by_one_fastest()
     last = None
-    for n in size.throughput_ns:
-        row = run_sweep(n, size.repeats if n < 1000 or (size.name == "full" and n < 10000) else 2)
-        last = row
-        rows.append(
-            {
-                "method": f"jaxunilat.sweep, event mode ({PIECE}) tol {TOL:g}",
-                "n": n,
-                "traj_per_s": row["traj_per_s"],
-                "peak_mem_mb": row["peak_mem_mb"],
-                "wall_s": row["wall_s"],
-                "compile_s": row["compile_s"],
-                "devices": row["devices"],
-                "all_ok": row["all_ok"],
-                "steps_mean": row["steps_mean"],
-                "steps_max": row["steps_max"],
-                "peer": False,
-            }
-        )
-        log(
-            f"  sweep N = {n:>6}: {row['traj_per_s']:10.1f} traj/s  wall {row['wall_s']:.3f} s  "
-            f"compile {row['compile_s']:.1f} s  steps mean {row['steps_mean']:.0f}, max {row['steps_max']}"
-        )
+    for one_by_one in (True, False) if fastest else (False,):
+        for n in size.throughput_ns:
+            row = run_sweep(
+                n,
+                size.repeats if n < 1000 or (size.name == "full" and n < 10000) else 2,
+                one_by_one=one_by_one,
+            )
+            if one_by_one == fastest:
+                last = row
+            rows.append(
+                {
+                    "method": f"jaxunilat.sweep, event mode ({PIECE}) tol {TOL:g}, {strategy(one_by_one)}",
+                    "n": n,
+                    "traj_per_s": row["traj_per_s"],
+                    "peak_mem_mb": row["peak_mem_mb"],
+                    "wall_s": row["wall_s"],
+                    "compile_s": row["compile_s"],
+                    "devices": row["devices"],
+                    "strategy": row["strategy"],
+                    "all_ok": row["all_ok"],
+                    "steps_mean": row["steps_mean"],
+                    "steps_max": row["steps_max"],
+                    "peer": False,
+                }
+            )
+            log(
+                f"  sweep N = {n:>6}, {row['strategy']}, {row['devices']} device(s): "
+                f"{row['traj_per_s']:10.1f} traj/s  wall {row['wall_s']:.3f} s  compile {row['compile_s']:.1f} s  "
+                f"steps mean {row['steps_mean']:.0f}, max {row['steps_max']}"
+            )
     # Accuracy of the largest batch: a few rows against the reference.
     ts = np.linspace(0.0, T1, SAMPLES)
     idx = np.unique(np.linspace(0, last["n"] - 1, size.error_checks).astype(int))
@@ -471,25 +477,36 @@ def _scale_out(size: Size, log) -> dict:
     """1-device against all-device throughput of the sharded sweep (N = size.scale_n)."""
     import jax
 
-    from ._bench_scale import scale_rows
+    from ._bench_scale import one_by_one_fastest, scale_rows
 
     repeats = max(2, size.repeats)
+    one_by_one = one_by_one_fastest()
     if jax.device_count() >= 2:
-        return {"how": "in process", "rows": scale_rows(size.scale_n, repeats)}
-    if jax.default_backend() != "cpu":
+        result = {"how": "in process", "rows": scale_rows(size.scale_n, repeats, one_by_one)}
+    elif jax.default_backend() != "cpu":
         return {"how": "skipped: a single accelerator is visible", "rows": []}
-    env = dict(os.environ)
-    env["XLA_FLAGS"] = (env.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2").strip()
-    env["JAX_PLATFORMS"] = "cpu"
-    cmd = [sys.executable, "-m", "jaxunilat._bench_scale", str(size.scale_n), str(repeats)]
-    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
-    if proc.returncode != 0:
-        tail = (proc.stderr.strip().splitlines() or ["no output"])[-1]
-        return {"how": "subprocess failed: " + tail, "rows": []}
-    result = json.loads(proc.stdout.strip().splitlines()[-1])
-    result["how"] = "subprocess with XLA_FLAGS=--xla_force_host_platform_device_count=2"
+    else:
+        env = dict(os.environ)
+        env["XLA_FLAGS"] = (env.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2").strip()
+        env["JAX_PLATFORMS"] = "cpu"
+        cmd = [sys.executable, "-m", "jaxunilat._bench_scale", str(size.scale_n), str(repeats)]
+        proc = subprocess.run(
+            cmd + (["--one-by-one"] if one_by_one else []),
+            env=env,
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+        if proc.returncode != 0:
+            tail = (proc.stderr.strip().splitlines() or ["no output"])[-1]
+            return {"how": "subprocess failed: " + tail, "rows": []}
+        result = json.loads(proc.stdout.strip().splitlines()[-1])
+        result["how"] = "subprocess with XLA_FLAGS=--xla_force_host_platform_device_count=2"
     for row in result["rows"]:
-        log(f"  scale-out N = {row['n']}: {row['devices']} device(s) {row['traj_per_s']:.1f} traj/s")
+        log(
+            f"  scale-out N = {row['n']}, {row['strategy']}: {row['devices']} device(s) "
+            f"{row['traj_per_s']:.1f} traj/s"
+        )
     return result
 
 
@@ -626,7 +643,7 @@ def _no_retrace(size: Size) -> dict:
     import jax
 
     from ._ball import Ball
-    from ._bench_scale import pairs, sweep_kwargs, trajectory
+    from ._bench_scale import one_by_one_fastest, pairs, sweep_kwargs, trajectory
     from ._simulate import simulate, trace_counts
     from ._sweep import sweep
 
@@ -640,7 +657,7 @@ def _no_retrace(size: Size) -> dict:
     jax.block_until_ready(simulate(Ball.table1(5), np.asarray(Y0), 1.5, rtol=1e-7, atol=1e-7, **common))
     n = size.throughput_ns[0]
     kappa, k_r = pairs(n, seed=1)  # new pairs, the batch size of a compiled run
-    jax.block_until_ready(sweep(trajectory, kappa, k_r, **sweep_kwargs(n)))
+    jax.block_until_ready(sweep(trajectory, kappa, k_r, **sweep_kwargs(n, one_by_one=one_by_one_fastest())))
     after = trace_counts()
     return {
         "calls": "event mode with new kappa, k_r, y0, t1, rtol/atol; sweep with new pairs",

@@ -57,8 +57,11 @@ def throughput_figure(result: dict):
     fig = Figure(figsize=(8, 5.5), constrained_layout=True)
     ax = fig.add_subplot()
     mine = sorted((r for r in result["throughput"] if not r["peer"]), key=lambda r: r["n"])
-    if mine:
-        ax.plot([r["n"] for r in mine], [r["traj_per_s"] for r in mine], "-s", label=mine[0]["method"])
+    for method in dict.fromkeys(r["method"] for r in mine):  # one line per sweep strategy
+        rows = [r for r in mine if r["method"] == method]
+        devices = rows[-1].get("devices")
+        label = method if devices is None else f"{method}, {devices} device(s)"
+        ax.plot([r["n"] for r in rows], [r["traj_per_s"] for r in rows], "-s", label=label)
     for r in (r for r in result["throughput"] if r["peer"]):
         ax.axhline(r["traj_per_s"], ls="--", color="C1", label=f"{r['method']} ({r['n']} pairs)")
     for r in result.get("scale_out", {}).get("rows", []):

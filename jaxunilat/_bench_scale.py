@@ -1,9 +1,12 @@
 """The benchmark's throughput scene and its 1-device against N-device measurement.
 
-`python -m jaxunilat._bench_scale N REPEATS` prints one JSON object with the sharded
-sweep's throughput on the first device alone and on all visible devices. The benchmark
-runs it in a subprocess with `XLA_FLAGS=--xla_force_host_platform_device_count=2` on a
-machine with a single CPU device (the flag must be set before JAX starts).
+Two ways to sweep: vmapped chunks of rows (`batch_size` `CHUNK`), and rows one by one
+(`batch_size=1`), which on a CPU whose loops compile into single kernels
+(`use_loop_kernels`) runs each row at its own pace instead of in lockstep.
+`jaxunilat bench` gives its process one CPU device per core (`host_devices`) so that
+`sweep` shards the rows over every core. `python -m jaxunilat._bench_scale N REPEATS
+[--one-by-one]` prints one JSON object with the sharded sweep's throughput on the first
+device alone and on all visible devices, for a process that could not get them itself.
 """
 
 from __future__ import annotations
@@ -59,19 +62,55 @@ def trajectory(kappa, k_r):
     return sol.ys["x"], sol.status, sol.num_steps
 
 
-def sweep_kwargs(n: int, devices=None) -> dict:
-    """`sweep`'s options for a batch of n rows: chunks of `CHUNK` rows beyond that size."""
+def host_devices() -> int | None:
+    """Give this process one CPU device per core, if JAX has not started yet (the
+    benchmark command calls it first): `sweep` then shards rows over every core.
+
+    **Returns:** the device count asked for, or None if it was too late or already set.
+    """
+    import os
+
+    from ._loop_kernels import _backend_started
+
+    flags = os.environ.get("XLA_FLAGS", "")
+    if "xla_force_host_platform_device_count" in flags or _backend_started():
+        return None
+    count = os.cpu_count() or 1
+    os.environ["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={count}".strip()
+    return count
+
+
+def one_by_one_fastest() -> bool:
+    """Whether sweeping rows one by one beats vmapped chunks here: on a CPU whose loops
+    compile into single kernels (`use_loop_kernels`). On a GPU, vmap."""
+    import jax
+
+    from ._loop_kernels import loop_kernel_bytes
+
+    return jax.default_backend() == "cpu" and loop_kernel_bytes() is not None
+
+
+def strategy(one_by_one: bool) -> str:
+    """The sweep strategy's name in the benchmark's rows."""
+    return "rows one by one (batch_size=1)" if one_by_one else f"vmapped (chunks of {CHUNK})"
+
+
+def sweep_kwargs(n: int, devices=None, one_by_one: bool = False) -> dict:
+    """`sweep`'s options for a batch of n rows: one by one, or vmapped in chunks of
+    `CHUNK` rows beyond that size."""
+    if one_by_one:
+        return dict(devices=devices, batch_size=1)
     return dict(devices=devices, batch_size=CHUNK if n > CHUNK else None)
 
 
-def run_sweep(n: int, repeats: int, devices=None) -> dict:
+def run_sweep(n: int, repeats: int, devices=None, one_by_one: bool = False) -> dict:
     """Time `sweep(trajectory, ...)` over n pairs: compile, median wall, memory, steps."""
     import jax
 
     from ._sweep import sweep, sweep_compiled
 
     kappa, k_r = pairs(n)
-    kw = sweep_kwargs(n, devices)
+    kw = sweep_kwargs(n, devices, one_by_one)
     start = time.perf_counter()
     compiled = sweep_compiled(trajectory, kappa, k_r, **kw)
     compile_s = time.perf_counter() - start
@@ -91,6 +130,7 @@ def run_sweep(n: int, repeats: int, devices=None) -> dict:
     x, status, steps = (np.asarray(a) for a in out)
     return {
         "n": int(n),
+        "strategy": strategy(one_by_one),
         "devices": n_dev,
         "wall_s": wall,
         "runs": len(walls),
@@ -106,13 +146,13 @@ def run_sweep(n: int, repeats: int, devices=None) -> dict:
     }
 
 
-def scale_rows(n: int, repeats: int) -> list[dict]:
+def scale_rows(n: int, repeats: int, one_by_one: bool = False) -> list[dict]:
     """Throughput on the first device alone, then on all visible devices."""
     import jax
 
     rows = []
     for devices in (jax.devices()[:1], jax.devices()):
-        row = run_sweep(n, repeats, devices=devices)
+        row = run_sweep(n, repeats, devices=devices, one_by_one=one_by_one)
         rows.append({k: v for k, v in row.items() if k not in ("x", "kappa", "k_r")})
     return rows
 
@@ -124,7 +164,7 @@ def main(argv: list[str] | None = None) -> int:
 
     argv = sys.argv[1:] if argv is None else argv
     n, repeats = int(argv[0]), int(argv[1])
-    rows = scale_rows(n, repeats)
+    rows = scale_rows(n, repeats, one_by_one="--one-by-one" in argv[2:])
     print(json.dumps({"platform": jax.default_backend(), "device_count": jax.device_count(), "rows": rows}))
     return 0
 

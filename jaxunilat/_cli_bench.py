@@ -42,6 +42,11 @@ def _run_bench(args) -> int:
 
     import json
 
+    from ._bench_scale import host_devices
+
+    # Before anything computes: one CPU device per core, so that sweeps use every core.
+    host_devices()
+
     from ._bench import goal_table, run_bench
     from ._bench_plot import throughput_figure, work_precision_figure
 

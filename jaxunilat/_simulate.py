@@ -317,6 +317,7 @@ def simulate(
         )
     check_range("y0", y0)
     t0, t1 = _time_span(t_span)
+    span = t1 - t0  # before the save times put t0 and t1 on the device
     if ts is None:
         if not isinstance(samples, (int, np.integer)) or samples < 2:
             raise ValueError(f"samples = {samples!r} is out of range; valid range is integers >= 2")
@@ -342,7 +343,7 @@ def simulate(
             raise ValueError(f"solver = 'event' is not supported for {type(model).__name__}")
     settings = make_settings(
         solver,
-        t1 - t0,
+        span,
         dt=dt,
         rtol=rtol,
         atol=atol,
