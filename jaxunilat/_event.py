@@ -41,6 +41,8 @@ compile the whole loop into one kernel (`jaxunilat.use_loop_kernels`).
 
 from __future__ import annotations
 
+import functools
+
 import diffrax as dfx
 import equinox as eqx
 import equinox.internal as eqxi
@@ -230,6 +232,83 @@ def _first_at_or_after(t_ends, n, ts, strict=False):
     lo = jnp.zeros(ts.shape, n.dtype)
     hi = jnp.full(ts.shape, n)
     return jax.lax.while_loop(lambda state: jnp.any(state[0] < state[1]), body, (lo, hi))[0]
+
+
+def _rows_of_times(rec, n_rec, n_ts):
+    """The recorded row that holds each save time. Rows hold consecutive runs of save
+    times (column 3: the index of a row's first one), so marking where each run starts
+    and counting the marks gives every time its row."""
+    rows = rec.shape[0]
+    starts = jax.lax.stop_gradient(rec[1:, 3]).astype(jnp.int32)
+    later = jnp.arange(1, rows) < n_rec
+    marks = jnp.zeros(n_ts, jnp.int32).at[jnp.where(later, starts, n_ts)].add(1, mode="drop")
+    return _running_sum(marks)
+
+
+def _contact_steps(rec, n_rec, ts, n_sw, step_to):
+    """For each save time: its recorded row, whether that row is a contact, and there the
+    pair's step from the row's start (`step_to(s, row)`; zeros at times in flight).
+
+    On a CPU one sequential scan over the save times (`_contact_steps_sequential`), all
+    in one loop kernel with `use_loop_kernels`; on other platforms vectorized
+    (`_contact_steps_vectorized`). Both give the same numbers.
+    """
+    return jax.lax.platform_dependent(
+        rec,
+        n_rec,
+        ts,
+        cpu=functools.partial(_contact_steps_sequential, n_sw=n_sw, step_to=step_to),
+        default=functools.partial(_contact_steps_vectorized, n_sw=n_sw, step_to=step_to),
+    )
+
+
+def _row_facts(rec, n_sw):
+    """(index of each row's first save time, whether each row is a contact)."""
+    rec = jax.lax.stop_gradient(rec)
+    return rec[:, 3].astype(jnp.int32), jnp.any(rec[:, _REC : _REC + n_sw] != 0, axis=1)
+
+
+def _contact_steps_sequential(rec, n_rec, ts, *, n_sw, step_to):
+    """`_contact_steps` as one scan over the save times: each time's row is the previous
+    time's or the next one (every recorded row holds at least one save time), and a step
+    is taken only at the times in contact."""
+    n = rec.shape[1] - _REC - n_sw
+    firsts, in_contact = _row_facts(rec, n_sw)
+    last = jnp.maximum(n_rec - 1, 0)
+
+    def body(r, s_and_p):
+        s, p = s_and_p
+        r = r + ((r < last) & (firsts[jnp.minimum(r + 1, rec.shape[0] - 1)] <= p))
+        row = jax.lax.dynamic_index_in_dim(rec, r, keepdims=False)
+        y = jax.lax.cond(in_contact[r], lambda: step_to(s, row), lambda: jnp.zeros(n, rec.dtype))
+        return r, (r, in_contact[r], y)
+
+    return jax.lax.scan(body, jnp.zeros((), jnp.int32), (ts, jnp.arange(ts.shape[0])))[1]
+
+
+def _contact_steps_vectorized(rec, n_rec, ts, *, n_sw, step_to, few=64):
+    """`_contact_steps` without a loop over the save times: the rows by
+    `_rows_of_times`, and the times in contact gathered into chunks of `few`, a chunk
+    with none skipped."""
+    n_ts, n = ts.shape[0], rec.shape[1] - _REC - n_sw
+    index = _rows_of_times(rec, n_rec, n_ts)
+    contact = _row_facts(rec, n_sw)[1][index]
+    size = min(n_ts, few)
+    chunks = -(-n_ts // size)
+    count = jnp.cumsum(contact)
+    # The times in contact in order (padding: n_ts, out of range), in chunks.
+    order = jnp.full(chunks * size, n_ts)
+    order = order.at[jnp.where(contact, count - 1, n_ts)].set(jnp.arange(n_ts), mode="drop")
+
+    def chunk(_, idx):
+        def work():
+            i = jnp.minimum(idx, n_ts - 1)
+            return jax.vmap(step_to)(ts[i], rec[index[i]])
+
+        return None, jax.lax.cond(idx[0] < n_ts, work, lambda: jnp.zeros((size, n), rec.dtype))
+
+    y = jax.lax.scan(chunk, None, order.reshape(chunks, size))[1].reshape(-1, n)
+    return index, contact, jnp.where(contact[:, None], y[jnp.clip(count - 1, 0, chunks * size - 1)], 0.0)
 
 
 def _running_sum(values):
@@ -676,52 +755,29 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
 
     # Outputs at the save times: the pair's own step from the start of the recorded step
     # that holds each time (as accurate as a step, so the tolerance bounds the outputs
-    # too; the dense interpolant is much less accurate inside Dopri8's long flight steps).
-    # Each save time's step: the recorded rows hold consecutive runs of save times, so
-    # marking where each run starts and counting the marks gives every time its row.
-    rec = jax.lax.stop_gradient(final["rec"])
-    starts = rec[1:, 3].astype(jnp.int32)
-    later = jnp.arange(1, rows) < final["n_rec"]
-    marks = jnp.zeros(n_ts, jnp.int32).at[jnp.where(later, starts, n_ts)].add(1, mode="drop")
-    index = _running_sum(marks)
-    held = final["rec"][index]
-    t_start, direction = held[:, 0], held[:, 2]
-    masks, y_start = held[:, _REC : _REC + n_sw] != 0, held[:, _REC + n_sw :]
+    # too; the dense interpolant is much less accurate inside Dopri8's long flight steps),
+    # and in free flight the closed form from there.
+    rec = final["rec"]
 
-    def step_to(s, t_st, sign, mask, y_st):
+    def step_to(s, row):
+        t_st, sign = row[0], row[2]
+        mask, y_st = row[_REC : _REC + n_sw] != 0, row[_REC + n_sw :]
+
         def piece_rhs(tt, z):
             return rhs(tt, z, mask, sign)
 
         return _erk_step(solver_cls, piece_rhs, t_st, s - t_st, y_st, piece_rhs(t_st, y_st))[0]
 
     if closed_flight:
-        # Most save times fall in free flight (the contacts last milliseconds): the
-        # closed form there, and a step of the pair only at the times in contact, taken
-        # in chunks of `few` of them (a chunk with none is skipped).
-        in_flight = ~jnp.any(masks, axis=1)
-        tau = jnp.where(in_flight, ts - t_start, 0.0)
-        y_flight = jax.vmap(model.flight_state)(y_start, tau, direction)
-        few = min(n_ts, 64)
-        chunks = -(-n_ts // few)
-        # The times in contact in order (padding: n_ts, out of range), and each one's rank.
-        contact = ~in_flight
-        count = _running_sum(contact.astype(jnp.int32))
-        order = jnp.full(chunks * few, n_ts)
-        order = order.at[jnp.where(contact, count - 1, n_ts)].set(jnp.arange(n_ts), mode="drop")
-
-        def chunk(_, idx):
-            def work():
-                i = jnp.minimum(idx, n_ts - 1)
-                return jax.vmap(step_to)(ts[i], t_start[i], direction[i], masks[i], y_start[i])
-
-            return None, jax.lax.cond(idx[0] < n_ts, work, lambda: jnp.zeros((few, n), dtype))
-
-        # The scan's body writes no scatter, so that it compiles into one kernel; each
-        # time in contact then reads its result by its rank.
-        y_contact = jax.lax.scan(chunk, None, order.reshape(chunks, few))[1].reshape(-1, n)
-        y = jnp.where(in_flight[:, None], y_flight, y_contact[jnp.clip(count - 1, 0, chunks * few - 1)])
+        # Steps of the pair only at the times in contact (the contacts last milliseconds).
+        index, contact, y_contact = _contact_steps(rec, final["n_rec"], ts, n_sw, step_to)
+        held = rec[index]
+        t_start, direction = held[:, 0], held[:, 2]
+        tau = jnp.where(contact, 0.0, ts - t_start)
+        y_flight = jax.vmap(model.flight_state)(held[:, _REC + n_sw :], tau, direction)
+        y = jnp.where(contact[:, None], y_contact, y_flight)
     else:
-        y = jax.vmap(step_to)(ts, t_start, direction, masks, y_start)
+        y = jax.vmap(step_to)(ts, rec[_rows_of_times(rec, final["n_rec"], n_ts)])
     y = jnp.where((ts == t0)[:, None], y0, y)
     ys = {name: jax.vmap(lambda s, z, name=name: model.output(name, s, z))(ts, y) for name in outputs}
     reached = ts <= final["t"]

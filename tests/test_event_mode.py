@@ -442,3 +442,36 @@ def test_output_search_matches_numpy_searchsorted(n):
     ts = np.concatenate([np.linspace(0.0, 2.5, 301), t_ends[:n]])  # ties included
     got = np.asarray(_first_at_or_after(jnp.asarray(t_ends), jnp.asarray(n), jnp.asarray(ts)))
     np.testing.assert_array_equal(got, np.searchsorted(t_ends[:n], ts, side="left"))
+
+
+def test_save_time_rows_sequential_and_vectorized_agree():
+    """The two lowerings of the outputs' bookkeeping (a scan over the save times on a
+    CPU, vectorized elsewhere) give the same row, contact flag and step for every save
+    time, on random records; the row is the last recorded one whose first save time is
+    at or before it (its definition)."""
+    from jaxunilat import _event
+
+    rng = np.random.default_rng(3)
+    n_sw, n = 2, 2
+    width = _event._REC + n_sw + n
+
+    def step_to(s, row):
+        return row[_event._REC + n_sw :] * s + row[0]
+
+    for n_ts in (1, 2, 7, 64, 65, 300):
+        ts = np.sort(rng.uniform(0.0, 1.0, n_ts))
+        for _ in range(3):
+            k = int(rng.integers(1, n_ts + 1))  # recorded rows, each holding >= 1 save time
+            firsts = np.concatenate([[0], np.sort(rng.choice(np.arange(1, n_ts), k - 1, replace=False))])
+            rec = np.zeros((n_ts + 3, width))
+            rec[:k, 0] = rng.uniform(-1, 0, k)
+            rec[:k, 3] = firsts
+            rec[:k, _event._REC : _event._REC + n_sw] = rng.uniform(size=(k, n_sw)) < 0.3
+            rec[:k, _event._REC + n_sw :] = rng.normal(size=(k, n))
+            args = (jnp.asarray(rec), jnp.asarray(k), jnp.asarray(ts))
+            seq = _event._contact_steps_sequential(*args, n_sw=n_sw, step_to=step_to)
+            vec = _event._contact_steps_vectorized(*args, n_sw=n_sw, step_to=step_to)
+            expected = np.searchsorted(firsts, np.arange(n_ts), side="right") - 1
+            np.testing.assert_array_equal(np.asarray(seq[0]), expected)
+            for a, b in zip(seq, vec, strict=True):
+                np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
