@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import enum
 import re
-from collections import Counter, OrderedDict
+from collections import Counter
 
 import diffrax as dfx
 import equinox as eqx
@@ -14,6 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
 
+from ._device_cache import DeviceCache
 from ._event import EventRecord, event_solve
 from ._heaviside import Exact
 from ._model import AbstractModel
@@ -196,8 +197,7 @@ def _run(model, y0, t0, t1, ts, settings, outputs, throw):
 
 #: Default save times on the device, by (t0, t1, samples): building them with NumPy and
 #: copying them to the device costs ~50 µs per call.
-_TIMES: OrderedDict = OrderedDict()
-_TIMES_SIZE = 64
+_TIMES = DeviceCache(64)
 
 
 def _default_times(t0, t1, samples: int):
@@ -205,17 +205,7 @@ def _default_times(t0, t1, samples: int):
     if not (is_concrete(t0) and is_concrete(t1)):
         return t0, t1, jnp.linspace(t0, t1, samples)
     key = (float(t0), float(t1), samples)
-    hit = _TIMES.get(key)
-    if hit is None:
-        hit = tuple(jax.device_put(a) for a in (t0, t1, np.linspace(key[0], key[1], samples)))
-        if any(isinstance(a, jax.core.Tracer) for a in hit):
-            return hit  # inside a transformation (jit, vmap): this trace's values, not for later
-        _TIMES[key] = hit
-        if len(_TIMES) > _TIMES_SIZE:
-            _TIMES.popitem(last=False)
-    else:
-        _TIMES.move_to_end(key)
-    return hit
+    return _TIMES.get(key, lambda: (t0, t1, np.linspace(key[0], key[1], samples)))
 
 
 def _time_span(t_span):

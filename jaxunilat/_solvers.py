@@ -3,16 +3,15 @@
 from __future__ import annotations
 
 import math
-from collections import OrderedDict
 from collections.abc import Callable
 from typing import ClassVar
 
 import diffrax as dfx
 import equinox as eqx
-import jax
 import numpy as np
 from jaxtyping import Array
 
+from ._device_cache import DeviceCache
 from ._validate import as_float_array, check_choice, check_range, is_concrete
 
 _rk4_tableau = dfx.ButcherTableau(
@@ -108,10 +107,10 @@ class SolverSettings(eqx.Module):
         return dfx.ForwardMode() if self.autodiff == "forward" else dfx.RecursiveCheckpointAdjoint()
 
 
-#: Settings built from plain numbers, by their arguments: building an equinox Module
-#: costs ~0.15 ms, a tenth of a short event-mode call (see `make_settings`).
-_CACHE: OrderedDict = OrderedDict()
-_CACHE_SIZE = 128
+#: Settings built from plain numbers, by their arguments, their arrays on the device:
+#: building an equinox Module costs ~0.15 ms, a tenth of a short event-mode call, and
+#: copying its arrays to the device on every call more (see `make_settings`).
+_CACHE = DeviceCache(128)
 _UNCACHED = object()
 
 
@@ -137,21 +136,7 @@ def make_settings(method: str, span, **kwargs) -> SolverSettings:
     if not isinstance(method, str) or span_key is _UNCACHED or any(p is _UNCACHED for _, p in parts):
         return _build_settings(method, span, **kwargs)
     key = (method, span_key, parts)
-    settings = _CACHE.get(key)
-    if settings is None:
-        settings = _build_settings(method, span, **kwargs)
-        # Its arrays on the device once, not copied there on every call (inside a
-        # transformation device_put gives this trace's values: those are not kept).
-        placed = jax.tree_util.tree_map(jax.device_put, settings)
-        if any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(placed)):
-            return settings
-        settings = placed
-        _CACHE[key] = settings
-        if len(_CACHE) > _CACHE_SIZE:
-            _CACHE.popitem(last=False)
-    else:
-        _CACHE.move_to_end(key)
-    return settings
+    return _CACHE.get(key, lambda: _build_settings(method, span, **kwargs))
 
 
 def _build_settings(
