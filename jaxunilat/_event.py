@@ -215,23 +215,19 @@ def _refine(state_at, rate, value_of, t_root, y_root, radius):
     return tt + delta, z + rate(tt, jax.lax.stop_gradient(z)) * delta
 
 
-def _first_at_or_after(t_ends, n, ts, strict=False):
-    """For each time in `ts` (an array, or one time): the index of the first of
-    `t_ends[:n]` (sorted) that is ≥ it (> it with `strict`), or n if none: a binary
-    search over the n filled entries only, ⌈log2(n + 1)⌉ iterations."""
-    t_ends = jax.lax.stop_gradient(t_ends)
-    ts = jax.lax.stop_gradient(ts)
+def _count_at_or_before(ts, t):
+    """How many of the sorted save times `ts` are ≤ t: a binary search, ⌈log2(len + 1)⌉
+    iterations."""
+    ts, t = jax.lax.stop_gradient(ts), jax.lax.stop_gradient(t)
 
     def body(state):
         lo, hi = state
         mid = (lo + hi) // 2
-        value = t_ends[jnp.minimum(mid, t_ends.shape[0] - 1)]
-        right = (lo < hi) & ((value <= ts) if strict else (value < ts))
+        right = ts[jnp.minimum(mid, ts.shape[0] - 1)] <= t
         return jnp.where(right, mid + 1, lo), jnp.where(right, hi, mid)
 
-    lo = jnp.zeros(ts.shape, n.dtype)
-    hi = jnp.full(ts.shape, n)
-    return jax.lax.while_loop(lambda state: jnp.any(state[0] < state[1]), body, (lo, hi))[0]
+    start = (jnp.array(0), jnp.array(ts.shape[0]))
+    return jax.lax.while_loop(lambda state: state[0] < state[1], body, start)[0]
 
 
 def _rows_of_times(rec, n_rec, n_ts):
@@ -705,9 +701,7 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         row = jnp.concatenate([jnp.stack([t, t_end, direction, first]), mask.astype(dtype), y])
         c["rec"] = eqxi.buffer_at_set(c["rec"], c["n_rec"], row, pred=holds & (c["n_rec"] < rows))
         c["n_rec"] = c["n_rec"] + jnp.where(holds, 1, 0)
-        c["saved"] = jnp.where(
-            holds, _first_at_or_after(ts, jnp.asarray(n_ts), t_end, strict=True), c["saved"]
-        )
+        c["saved"] = jnp.where(holds, _count_at_or_before(ts, t_end), c["saved"])
 
         # An apex in every flight; the first deepest point in each contact.
         ext_pred, t_ext, y_ext = out["ext"]

@@ -430,18 +430,17 @@ def test_apex_height_gradient_vs_reference_finite_differences():
         assert abs(grad[i] - fd) <= 1e-5 * abs(fd)
 
 
-@pytest.mark.parametrize("n", [0, 1, 7, 100])
-def test_output_search_matches_numpy_searchsorted(n):
-    """The save times' step lookup searches the n filled rows only; it must agree with
-    numpy's searchsorted(side="left") on them (n where a time is beyond the last)."""
-    from jaxunilat._event import _first_at_or_after
+@pytest.mark.parametrize("n", [1, 2, 7, 100])
+def test_save_time_count_matches_numpy_searchsorted(n):
+    """A recorded step covers the save times up to its end: their count must agree with
+    numpy's searchsorted(side="right"), ties and times beyond either end included."""
+    from jaxunilat._event import _count_at_or_before
 
     rng = np.random.default_rng(n)
-    t_ends = np.zeros(128)
-    t_ends[:n] = np.sort(rng.uniform(0.0, 2.0, n))
-    ts = np.concatenate([np.linspace(0.0, 2.5, 301), t_ends[:n]])  # ties included
-    got = np.asarray(_first_at_or_after(jnp.asarray(t_ends), jnp.asarray(n), jnp.asarray(ts)))
-    np.testing.assert_array_equal(got, np.searchsorted(t_ends[:n], ts, side="left"))
+    ts = np.sort(rng.uniform(0.0, 2.0, n))
+    for t in np.concatenate([ts, rng.uniform(-0.5, 2.5, 50), [-1.0, 3.0]]):
+        got = int(_count_at_or_before(jnp.asarray(ts), jnp.asarray(t)))
+        assert got == np.searchsorted(ts, t, side="right")
 
 
 def test_save_time_rows_sequential_and_vectorized_agree():
