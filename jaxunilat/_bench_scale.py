@@ -70,14 +70,13 @@ def host_devices() -> int | None:
     """
     import os
 
-    from ._loop_kernels import _backend_started
+    from ._loop_kernels import add_xla_flags
 
     flags = os.environ.get("XLA_FLAGS", "")
-    if "xla_force_host_platform_device_count" in flags or _backend_started():
-        return None
     count = os.cpu_count() or 1
-    os.environ["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={count}".strip()
-    return count
+    if "xla_force_host_platform_device_count" in flags:
+        return None
+    return count if add_xla_flags(f"{flags} --xla_force_host_platform_device_count={count}".strip()) else None
 
 
 def one_by_one_fastest() -> bool:

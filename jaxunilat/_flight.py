@@ -79,10 +79,10 @@ def flight_state(x0, v0, tau, g, k, rising):
     scale = 1.0 / (gs * ks * ks)
     # Each half gets a safe φ where it is not used (0), so that neither its values nor
     # its derivatives overflow in the branch `where` discards. Rising: the half angle
-    # (sin φ = 2sc, cos φ = 1 − 2s², s = sin(φ/2) by its series). Falling: everything from e = expm1(φ), with
-    # cosh φ − 1 = e²/(2(1 + e)) and sinh φ = e(2 + e)/(2(1 + e)), sums of terms of one
-    # sign (no cancellation at small φ), and expm1 is several times cheaper than sinh.
-    # One log1p serves both halves: three transcendental functions per evaluation.
+    # (sin φ = 2sc, cos φ = 1 − 2s², s = sin(φ/2) by its series). Falling: everything
+    # from e = expm1(φ), with cosh φ − 1 = e²/(2(1 + e)) and sinh φ = e(2 + e)/(2(1 + e)),
+    # sums of terms of one sign (no cancellation at small φ); expm1 is several times
+    # cheaper than sinh. One log1p serves both halves.
     phi_up = jnp.where(rising, phi, 0.0)  # < atan(b) < π/2 in a rising piece
     phi_down = jnp.where(rising, 0.0, jnp.minimum(phi, MAX_PHI))
     b = ks * v0

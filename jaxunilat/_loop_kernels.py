@@ -75,7 +75,7 @@ def use_loop_kernels(byte_threshold: int = DEFAULT_BYTES) -> bool:
     flags = os.environ.get("XLA_FLAGS", "")
     if loop_kernel_bytes(flags) is not None:
         return True
-    if _backend_started():
+    if not add_xla_flags(_loop_setting(flags, byte_threshold)):
         warnings.warn(
             "jaxunilat.use_loop_kernels() came after JAX started its backend, so it has no effect "
             f"in this process; call it before the first JAX computation, or start Python with "
@@ -84,11 +84,22 @@ def use_loop_kernels(byte_threshold: int = DEFAULT_BYTES) -> bool:
             stacklevel=2,
         )
         return False
+    return True
+
+
+def _loop_setting(flags: str, byte_threshold: int) -> str:
+    """`flags` with the loop-kernel option added (to an existing backend-options list,
+    if there is one)."""
     setting = f"{OPTION}={byte_threshold}"
     if _EXTRA in flags:
-        # Other backend options are already there: add ours to the same list.
-        flags = flags.replace(_EXTRA, f"{_EXTRA}{setting},", 1)
-    else:
-        flags = f"{flags} {_EXTRA}{setting}".strip()
+        return flags.replace(_EXTRA, f"{_EXTRA}{setting},", 1)
+    return f"{flags} {_EXTRA}{setting}".strip()
+
+
+def add_xla_flags(flags: str) -> bool:
+    """Set `XLA_FLAGS` to `flags` if JAX has not started its backend yet (XLA reads the
+    variable once, then); True if it was set."""
+    if _backend_started():
+        return False
     os.environ["XLA_FLAGS"] = flags
     return True
