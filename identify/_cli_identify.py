@@ -60,8 +60,9 @@ def _run_identify(args) -> int:
             raise ValueError(f"--fit {name!r} is not a nuisance parameter; valid: {', '.join(NUISANCE)}")
     if args.starts < 1:
         raise ValueError(f"--starts {args.starts} is out of range; valid range is integers >= 1")
-    check_output_paths(("--json", args.json), ("--plot", args.plot))
-    data = load_dataset(args.data if args.data is not None else default_data_path())
+    data_path = args.data if args.data is not None else default_data_path()
+    check_output_paths(("--json", args.json), ("--plot", args.plot), inputs=(("DATA", data_path),))
+    data = load_dataset(data_path)
     result = fit(
         data,
         nuisance=nuisance,

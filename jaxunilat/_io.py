@@ -12,13 +12,25 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 
+def _same_file(a: str, b: str) -> bool:
+    """Whether two paths name one file: the same spelling, relative or absolute, or a
+    symlink (also a dangling one, or one whose target does not exist yet)."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.exists(a) and os.path.exists(b) and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
 def check_output_path(path: str | os.PathLike, *, inputs: Iterable[str | os.PathLike] = ()) -> None:
     """Raise `ValueError` unless `path` can be written as a new or replaced file.
 
     **Arguments:**
 
     - `path`: the file to write.
-    - `inputs`: files this run reads; `path` must not be one of them.
+    - `inputs`: files this run reads; `path` must not resolve to any of them (compared
+      after resolving symlinks and relative spellings, and by inode where both exist).
     """
     path = os.fspath(path)
     if os.path.isdir(path):
@@ -26,22 +38,44 @@ def check_output_path(path: str | os.PathLike, *, inputs: Iterable[str | os.Path
     parent = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(parent):
         raise ValueError(f"output path {path!r}: the directory {parent!r} does not exist")
-    if os.path.exists(path):
-        for src in inputs:
-            if os.path.exists(src) and os.path.samefile(path, src):
-                raise ValueError(f"output path {path!r} is an input file; refusing to overwrite it")
+    for src in inputs:
+        if src is not None and _same_file(path, os.fspath(src)):
+            raise ValueError(
+                f"output path {path!r} is the input file {os.fspath(src)!r}; refusing to overwrite it"
+            )
 
 
-def check_output_paths(*named: tuple[str, str | os.PathLike | None]) -> None:
-    """`check_output_path` for each `(flag, path)` given (None: not asked for), and no two
-    flags naming the same file."""
+def check_output_paths(
+    *named: tuple[str, str | os.PathLike | None],
+    inputs: Iterable[tuple[str, str | os.PathLike | None]] = (),
+) -> None:
+    """Check a command's outputs before any work starts.
+
+    Each `(flag, path)` in `named` is an output (None: not asked for); each
+    `(name, path)` in `inputs` is a file the command reads. Raises `ValueError` naming
+    the flags when an output is a directory or lies in a missing one, resolves to an
+    input (the same path, another spelling of it, or a symlink to it), or resolves to
+    another output.
+    """
     named = [(flag, os.fspath(path)) for flag, path in named if path is not None]
-    for _, path in named:
-        check_output_path(path)
+    inputs = [(name, os.fspath(path)) for name, path in inputs if path is not None]
+    for flag, path in named:
+        try:
+            check_output_path(path)
+        except ValueError as err:
+            raise ValueError(f"{flag}: {err}") from None
+        for name, src in inputs:
+            if _same_file(path, src):
+                raise ValueError(
+                    f"{flag} {path!r} is the input {name} {src!r}; refusing to overwrite it "
+                    "(choose another output path)"
+                )
     for i, (flag_a, path_a) in enumerate(named):
         for flag_b, path_b in named[i + 1 :]:
-            if os.path.abspath(path_a) == os.path.abspath(path_b):
-                raise ValueError(f"{flag_a} and {flag_b} name the same file {path_a!r}")
+            if _same_file(path_a, path_b):
+                raise ValueError(
+                    f"{flag_a} and {flag_b} name the same file {path_a!r}; give each its own path"
+                )
 
 
 def write_csv(
