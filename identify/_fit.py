@@ -42,29 +42,20 @@ import optax
 
 from jaxunilat._validate import check_choice, check_range
 
-from ._initial import CONTACT_TIME_GUESS, CONTACT_TIME_PRIOR, first_impact_time, initial_restitution
-from ._kelvin_voigt import parameters_from_restitution
-from ._problem import LOG_PARAMETERS, NUISANCE, PARAMETERS, Problem, evaluate_rows, make_problem, to_z
+from ._initial import CONTACT_TIME_GUESS
+from ._joint import Layout
+from ._problem import LAWS, LOG_PARAMETERS, NUISANCE, PARAMETERS
 from ._result import FitResult
-from ._uncertainty import Z95, covariance, goodness_of_fit, summarize
+from ._robust import THRESHOLD, Rows, cauchy_weights, flag_outliers, robust_scale
+from ._setup import build, start_point, start_points
+from ._summary import derived_quantities, summarize_fit
+from ._uncertainty import Z95, covariance
 
 METHODS = ("lm", "optax")
-_WINDOWS = (0.35, 0.65, 1.0)
 #: Levenberg–Marquardt damping divisor after an accepted step. Along the κ–k_r ridge
 #: (correlation ~0.99999) a slowly released damping crawls: with 3, each start of the
 #: impacts fit took 12 accepted steps, each step ~3x the last; with 10 it takes 6.
 _LAMBDA_DOWN = 10.0
-#: sd of log t_c in the steering prior: the 0.5–2 ms prior as ±2 sd around 1 ms.
-_PRIOR_SD = math.log(2.0) / 2.0
-_FD_STEP = {"kappa": 1e-4, "k_r": 1e-4, "drag": 1e-4, "x0": 1e-6, "v0": 1e-5, "offset": 1e-6}
-_DEFAULT_BOUNDS = {
-    "kappa": (1.0, 1e12),
-    "k_r": (1e-12, 1e4),
-    "drag": (1e-6, 10.0),
-    "x0": (-1e3, 1e3),
-    "v0": (-1e3, 1e3),
-    "offset": (-1e4, 1e4),
-}
 
 
 def default_optimizer(learning_rate: float = 0.02) -> optax.GradientTransformation:
@@ -83,78 +74,6 @@ def _load(data):
     if isinstance(data, (str, bytes)) or hasattr(data, "__fspath__"):
         return load_dataset(data)
     raise ValueError(f"data = {data!r} is not an identify.Dataset or a path to a data file")
-
-
-#: Parameters that shift every prediction by their own value (impact onsets + offset):
-#: their Jacobian column is 1/σ exactly, so they take no runs.
-_SHIFTS = ("offset",)
-
-
-@dataclasses.dataclass
-class _Evaluator:
-    """r and J at a point: one compiled map over the point and its neighbours.
-
-    A parameter in `_SHIFTS` gets its column in closed form; every other free one
-    gets a central difference (2 runs).
-    """
-
-    problem: Problem
-    free: list[int]
-    steps: np.ndarray
-    mass: float
-    prior: bool = True
-    calls: int = 0
-
-    @property
-    def differenced(self) -> list[int]:
-        """The free parameters whose columns are central differences."""
-        return [i for i in self.free if PARAMETERS[i] not in _SHIFTS]
-
-    @property
-    def rows(self) -> int:
-        """Runs per compiled call: the point and two neighbours per differenced parameter."""
-        return 2 * len(self.differenced) + 1
-
-    def _prior(self, zs):
-        """The steering prior's residual: (log t_c − log t_c,prior)/sd, per row of zs."""
-        kappa, k_r = np.exp(zs[:, 0]), np.exp(zs[:, 1])
-        omega2 = kappa / self.mass - (k_r / (2 * self.mass)) ** 2
-        t_c = np.pi / np.sqrt(np.maximum(omega2, 1e-300))
-        return (np.log(t_c) - math.log(CONTACT_TIME_GUESS)) / _PRIOR_SD
-
-    def __call__(self, z):
-        fd = self.differenced
-        p = len(fd)
-        h = np.zeros((self.rows, len(PARAMETERS)))
-        h[1 + np.arange(p), fd] = self.steps[fd]
-        h[1 + p + np.arange(p), fd] = -self.steps[fd]
-        zs = z[None, :] + h
-        res, ok = evaluate_rows(self.problem, jax.device_put(zs))
-        res, ok = np.asarray(res), np.asarray(ok)
-        n_data = res.shape[1]
-        if self.prior:
-            res = np.concatenate([res, self._prior(zs)[:, None]], axis=1)
-        self.calls += 1
-        jac = np.zeros((res.shape[1], len(self.free)))
-        jac[:, [self.free.index(i) for i in fd]] = (res[1 : 1 + p] - res[1 + p :]).T / (2 * self.steps[fd])
-        # A shift: r = (prediction + value − data)/σ, so ∂r/∂value = 1/σ on the data rows.
-        shifts = [j for j, i in enumerate(self.free) if i not in fd]
-        jac[:n_data, shifts] = (1.0 / np.broadcast_to(np.asarray(self.problem.sigma), (n_data,)))[:, None]
-        return res[0], jac, bool(ok[0] and np.all(ok))
-
-    def values(self, zs):
-        """Residuals at several points (padded to the compiled row count)."""
-        rows = self.rows
-        out = []
-        for k in range(0, len(zs), rows):
-            chunk = np.asarray(zs[k : k + rows])
-            pad = np.concatenate([chunk, np.repeat(chunk[-1:], rows - len(chunk), axis=0)])
-            res, ok = evaluate_rows(self.problem, jax.device_put(pad))
-            res, ok = np.asarray(res), np.asarray(ok)
-            if self.prior:
-                res = np.concatenate([res, self._prior(pad)[:, None]], axis=1)
-            out += [(res[i], bool(ok[i])) for i in range(len(chunk))]
-        return out
 
 
 def _newton_decrement(a, g, d):
@@ -221,14 +140,56 @@ def _levenberg_marquardt(evaluator, z, free, weights, lo, hi, *, max_iterations,
     return z, r, jac, cost, max_iterations, False, f"max_iterations = {max_iterations} reached"
 
 
-def _window_weights(problem: Problem, fraction: float, prior: bool = True) -> np.ndarray:
-    """Weights of the data rows (1 inside the window), plus the prior's row when used."""
-    t = np.asarray(problem.t_obs)
-    if problem.observe != "trace" or fraction >= 1.0:
-        w = np.ones_like(t)
-    else:
-        w = (t <= t[0] + fraction * (t[-1] - t[0])).astype(float)
-    return np.concatenate([w, [1.0]]) if prior else w
+_WINDOWS = (0.35, 0.65, 1.0)
+GRADIENTS = ("forward", "reverse")
+
+
+@dataclasses.dataclass
+class _Options:
+    """A fit's settings after validation (see `fit`)."""
+
+    nuisance: tuple[str, ...]
+    freeze: tuple[str, ...]
+    starts: int
+    seed: int
+    method: str
+    optimizer: optax.GradientTransformation
+    steps: int
+    max_iterations: int
+    profile: bool
+    rel_halfwidth: float
+    progress: bool
+    keep_outliers: bool
+    threshold: float
+    holdout: float
+    gradient: str
+
+
+@dataclasses.dataclass
+class _Point:
+    """Where a stage left the fit: the joint z, its residuals, Jacobian and cost."""
+
+    z: np.ndarray
+    r: np.ndarray
+    jac: np.ndarray
+    cost: float
+    iterations: int
+    converged: bool
+    why: str
+    gradient_steps: int = 0
+
+    @classmethod
+    def from_lm(cls, out, *, iterations: int = 0, gradient_steps: int = 0) -> _Point:
+        z, r, jac, cost, it, converged, why = out
+        return cls(z, r, jac, cost, iterations + it, converged, why, gradient_steps)
+
+
+def _load_all(data) -> list:
+    if isinstance(data, (list, tuple)):
+        if not data:
+            raise ValueError("data = [] names no data set; give at least one data file")
+        return [_load(d) for d in data]
+    return [_load(data)]
 
 
 def fit(
@@ -248,295 +209,364 @@ def fit(
     profile: bool = False,
     rel_halfwidth: float = 0.25,
     progress: bool = False,
+    law: str = "kelvin-voigt",
+    keep_outliers: bool = False,
+    outlier_threshold: float = THRESHOLD,
+    holdout: float = 0.0,
+    gradient: str = "forward",
 ) -> FitResult:
-    """Fit κ and k_r of the Kelvin–Voigt ball model [K90 Eq. 3.1–3.3] to one data set.
+    """Fit κ and k_r of the ball model [K90 Eq. 3.1–3.3] to one or several data sets.
 
     **Arguments:**
 
-    - `data`: an `identify.Dataset` or the path of a data file (`identify.load_dataset`).
+    - `data`: an `identify.Dataset` or a data file's path, or a list of them: a joint
+      fit shares κ, k_r (and the drag, when fitted) and gives each file its own x0, v0
+      and offset.
     - `nuisance`: extra parameters to fit, from `("drag", "x0", "v0", "offset")`;
-      `offset` (the recording's unknown time origin, s) applies to impact data only.
+      `offset` (the recording's unknown time origin, s) applies to impact onsets and to
+      traces (a video rarely starts at the release), not to apex heights.
     - `freeze`: parameters held at their initial value, e.g. `("k_r",)`.
-    - `initial`: starting values in SI units (kappa N/m, k_r N·s/m, drag s/m, x0 m,
-      v0 m/s, offset s); default: the closed-form guess and the file's values.
+    - `initial`: starting values in SI units (kappa, k_r in the law's units, drag s/m,
+      x0 m, v0 m/s, offset s); default: the closed-form guess and the files' values.
     - `bounds`: `{name: (lo, hi)}` in SI units; the fit stays inside (projection).
     - `starts`: the number of starts (≥ 1); the best final cost wins.
     - `seed`: the seed of the starts' jitter.
     - `method`: `"lm"` (Levenberg–Marquardt only) or `"optax"` (`steps` iterations of
-      `optimizer` with reverse-mode gradients through the event mode, then LM).
+      `optimizer` on ½Σr², then LM).
     - `optimizer`: an `optax.GradientTransformation`; default `default_optimizer()`.
     - `steps`: iterations of the gradient stage per start (`method="optax"`).
-    - `max_iterations`: LM iterations per window.
+    - `max_iterations`: LM iterations per stage.
     - `tol`: the event mode's rtol = atol for every simulation.
     - `profile`: also compute the profile likelihood of κ (13 points, ±3 sd).
     - `rel_halfwidth`: the identifiability threshold (95% half-width / value).
     - `progress`: show a progress bar over the starts (on stderr).
+    - `law`: `"kelvin-voigt"` (the paper's linear spring and damper), `"hunt-crossley"`
+      (F = κδ^1.5 + k_r δ^1.5 δ̇: restitution falling with impact speed) or `"auto"`
+      (fit both, report χ², AIC and BIC side by side, keep the lower BIC).
+    - `keep_outliers`: skip the robust pass; every row is fitted by least squares.
+    - `outlier_threshold`: rows beyond this many robust residual scales are excluded.
+    - `holdout`: fit the first (1 − holdout) of each file's rows and predict the rest
+      (0 ≤ holdout < 1).
+    - `gradient`: the optax stage's gradient, `"forward"` (Jᵀr from forward-mode
+      Jacobians through the event mode: a few solves for κ and k_r, and a quick
+      compile) or `"reverse"` (`jax.grad`).
 
     **Returns:** a `FitResult` (`.report()`, `.to_json_dict()`, `.parameters`, …).
     """
     began = time.perf_counter()
-    data = _load(data)
-    nuisance = tuple(nuisance)
-    freeze = tuple(freeze)
+    datasets = _load_all(data)
+    opts = _check_arguments(
+        datasets, nuisance, freeze, starts, steps, max_iterations, tol, rel_halfwidth, optimizer, method,
+        seed, profile, progress, keep_outliers, outlier_threshold, holdout, gradient,
+    )  # fmt: skip
+    check_choice("law", law, (*LAWS, "auto"))
+    initial, bounds = _check_start(initial, bounds)
+    laws = LAWS if law == "auto" else (law,)
+    results = {}
+    for name in laws:
+        setup = build(
+            datasets, law=name, nuisance=opts.nuisance, freeze=opts.freeze, initial=initial,
+            bounds=bounds, tol=tol,
+        )  # fmt: skip
+        results[name] = _fit_law(setup, opts)
+    common = np.logical_and.reduce([r.used for r in results.values()])
+    comparison = {name: r.criteria(common) for name, r in results.items()}
+    chosen = min(results, key=lambda n: comparison[n]["bic"])
+    result = results[chosen]
+    result.laws = comparison
+    result.law_choice = "auto (lowest BIC)" if law == "auto" else "given"
+    result.wall_s = time.perf_counter() - began
+    return result
+
+
+def _check_arguments(
+    datasets, nuisance, freeze, starts, steps, max_iterations, tol, rel_halfwidth, optimizer, method,
+    seed, profile, progress, keep_outliers, threshold, holdout, gradient,
+) -> _Options:  # fmt: skip
+    nuisance, freeze = tuple(nuisance), tuple(freeze)
     for name in nuisance:
         check_choice("nuisance", name, NUISANCE)
     for name in freeze:
         check_choice("freeze", name, PARAMETERS)
-    if "offset" in nuisance and data.observe != "impacts":
-        raise ValueError(
-            f"nuisance 'offset' (a time offset, s) applies to impact data only; this data set has "
-            f"observe = {data.observe!r}"
-        )
+    if "offset" in nuisance:
+        for d in datasets:
+            if d.observe == "apex":
+                raise ValueError(
+                    "nuisance 'offset' (a time offset, s) applies to impact onsets and traces; "
+                    f"{d.path or 'a data set'} has observe = 'apex'"
+                )
     if set(freeze) >= {"kappa", "k_r"}:
         raise ValueError("freeze = ('kappa', 'k_r') leaves nothing to fit; free at least one of them")
     check_choice("method", method, METHODS)
-    if not isinstance(starts, int) or starts < 1:
-        raise ValueError(f"starts = {starts!r} is out of range; valid range is integers >= 1")
-    if not isinstance(steps, int) or steps < 0:
-        raise ValueError(f"steps = {steps!r} is out of range; valid range is integers >= 0")
-    if not isinstance(max_iterations, int) or max_iterations < 1:
-        raise ValueError(f"max_iterations = {max_iterations!r} is out of range; valid range is integers >= 1")
+    check_choice("gradient", gradient, GRADIENTS)
+    for name, value, lo in (
+        ("starts", starts, 1),
+        ("steps", steps, 0),
+        ("max_iterations", max_iterations, 1),
+    ):
+        if not isinstance(value, int) or isinstance(value, bool) or value < lo:
+            raise ValueError(f"{name} = {value!r} is out of range; valid range is integers >= {lo}")
     check_range("tol", tol, lo=1e-14, hi=1e-4, unit="")
     check_range("rel_halfwidth", rel_halfwidth, lo=0.0, lo_open=True, unit="")
+    check_range("outlier_threshold", threshold, lo=1.0, unit="robust sd")
+    check_range("holdout", holdout, lo=0.0, hi=1.0, hi_open=True, unit="")
+    if holdout > 0:
+        for d in datasets:
+            keep = d.num_rows - int(math.floor(holdout * d.num_rows + 1e-9))
+            if keep < MIN_FITTED[d.observe] or keep == d.num_rows:
+                raise ValueError(
+                    f"holdout = {holdout!r} leaves {keep} of {d.num_rows} rows of {d.path or 'a data set'} to fit "
+                    f"and {d.num_rows - keep} to predict; valid: at least {MIN_FITTED[d.observe]} to fit and 1 to predict"
+                )
     if optimizer is not None and not isinstance(optimizer, optax.GradientTransformation):
         raise ValueError(f"optimizer = {optimizer!r} is not an optax.GradientTransformation")
+    return _Options(
+        nuisance, freeze, starts, seed, method, optimizer or _DEFAULT_OPTIMIZER, steps, max_iterations,
+        bool(profile), float(rel_halfwidth), bool(progress), bool(keep_outliers), float(threshold),
+        float(holdout), gradient,
+    )  # fmt: skip
+
+
+#: The fewest rows a fit may keep per file (the rest held out).
+MIN_FITTED = {"trace": 3, "impacts": 3, "apex": 1}
+
+
+def _check_start(initial, bounds):
     initial = dict(initial or {})
     for name, value in initial.items():
         check_choice("initial", name, PARAMETERS)
         check_range(f"initial[{name!r}]", value, lo=0.0 if name in LOG_PARAMETERS else None, lo_open=True)
-    bounds = {**_DEFAULT_BOUNDS, **(bounds or {})}
+    bounds = dict(bounds or {})
     for name, pair in bounds.items():
         check_choice("bounds", name, PARAMETERS)
         if len(pair) != 2 or not pair[0] < pair[1]:
             raise ValueError(f"bounds[{name!r}] = {pair!r} must be a pair (lo, hi) with lo < hi")
         if name in LOG_PARAMETERS and pair[0] <= 0:
             raise ValueError(f"bounds[{name!r}] = {pair!r}: {name} is positive; valid lower bounds are > 0")
+    return initial, bounds
 
-    mass, gravity = float(data.mass), float(data.gravity)
-    has_drag = data.drag > 0 or "drag" in nuisance
-    sigma_known = data.noise is not None
-    sigma = float(data.noise) if sigma_known else 1.0
 
-    # -- the closed-form start --------------------------------------------------------
-    e0 = initial_restitution(data)
-    values = dict(
-        drag=initial.get("drag", data.drag if data.drag > 0 else 0.12),
-        x0=initial.get("x0", data.x0),
-        v0=initial.get("v0", data.v0),
-        offset=initial.get("offset", 0.0),
-    )
-    horizon = None
-    if data.observe == "impacts":
-        fall = first_impact_time(data.x0, data.v0, gravity) if data.scene == "drop" else 0.0
-        if "offset" in nuisance and "offset" not in initial:
-            values["offset"] = float(data.t[0]) - fall
-        # Just past the last observed impact (a longer run only adds ever shorter bounces).
-        last_flight = float(data.t[-1] - data.t[-2])
-        horizon = float(data.t[-1]) - values["offset"] + 0.5 * last_flight + 0.05
-    elif data.observe == "apex":
-        fall = first_impact_time(data.x0, data.v0, gravity) if data.scene == "drop" else 0.0
-        flights = 2.0 * np.sqrt(2.0 * np.asarray(data.h) / gravity)
-        horizon = fall + 1.05 * float(np.sum(flights)) + 0.05
-        if data.t is not None:
-            horizon = max(horizon, float(data.t[-1]) + 0.6 * float(flights[-1]) + 0.05)
-    problem = make_problem(data, tol=tol, has_drag=has_drag, sigma=sigma, horizon=horizon)
+def _fit_law(setup, opts: _Options) -> FitResult:
+    """Every stage for one contact law: starts, windows, robust pass, final pass, summary."""
+    began = time.perf_counter()
+    rows = Rows.make(setup.n_rows, opts.holdout)
+    e0, e_source = _initial_restitution(setup, rows)
+    candidates = start_points(setup, e0, opts.starts, np.random.default_rng(opts.seed))
+    runs = _run_starts(setup, candidates, rows, opts)
+    best = min(runs, key=lambda run: run.cost)
+    for fraction in _windows(setup)[1:]:
+        out = _lm(setup, best.z, _weights(setup, rows, fraction), opts, dchi2=1e-2)
+        best = _Point.from_lm(out, iterations=best.iterations, gradient_steps=best.gradient_steps)
+    scale = None
+    if not opts.keep_outliers:
+        best, rows, scale = _robust_pass(setup, best, rows, opts)
+    best = _final_pass(setup, best, rows, opts)
+    initial = dict(restitution=e0, contact_time=CONTACT_TIME_GUESS, source=e_source)
+    result = summarize_fit(setup, best, rows, opts, runs=runs, initial=initial, robust_scale=scale)
+    if opts.profile and setup.layout.index[0, 0] in setup.free:
+        result.profile = _profile_kappa(setup, best, rows, result, opts)
+    result.wall_s = time.perf_counter() - began
+    return result
 
-    free = [
-        i for i, n in enumerate(PARAMETERS) if (n in ("kappa", "k_r") or n in nuisance) and n not in freeze
+
+def _initial_restitution(setup, rows) -> tuple[float, str]:
+    if setup.e0 is not None:
+        return setup.e0, setup.e_source
+    # No closed form (two-racket traces): the best e on a grid, at the prior's t_c.
+    ev = setup.evaluator
+    grid = np.linspace(0.3, 0.98, ev.rows)
+    w = _weights(setup, rows, _WINDOWS[0])
+    costs = [
+        np.sum((w * r) ** 2) if ok else np.inf
+        for r, ok in ev.values([start_point(setup, e, CONTACT_TIME_GUESS) for e in grid])
     ]
-    lo = to_z({n: bounds[n][0] for n in PARAMETERS})
-    hi = to_z({n: bounds[n][1] for n in PARAMETERS})
-    fd = np.array(
-        [_FD_STEP[n] * (1.0 if n in LOG_PARAMETERS else max(1.0, abs(values[n]))) for n in PARAMETERS]
+    return float(grid[int(np.argmin(costs))]), "grid search (no closed form for this scene)"
+
+
+def _windows(setup) -> tuple[float, ...]:
+    """Growing windows for traces and for onset sequences (apex heights: all at once)."""
+    return _WINDOWS if any(d.observe in ("trace", "impacts") for d in setup.datasets) else (1.0,)
+
+
+def _weights(setup, rows, fraction: float = 1.0, robust: np.ndarray | None = None) -> np.ndarray:
+    """Weights of the data rows (fitted rows inside the window), then 1 per prior row in use.
+
+    A trace's or an onset sequence's window keeps the rows in the first `fraction` of
+    its span: Adam or LM on a raw 2 s trace from a 2× wrong start goes out of phase,
+    and late onsets predicted from a wrong start get matched to the wrong bounce, while
+    a window that holds the first bounces pins the phase and each longer window starts
+    next to its optimum.
+    """
+    w = rows.fitted.astype(float)
+    if fraction < 1.0:
+        for f, d in enumerate(setup.datasets):
+            if d.observe in ("trace", "impacts"):
+                t = setup.times[f]
+                w[rows.of_file(f)] *= t <= t[0] + fraction * (t[-1] - t[0])
+    if robust is not None:
+        w = w * robust
+    ev = setup.evaluator
+    return np.concatenate([w, np.ones(len(ev._prior_pairs()))]) if ev.prior else w
+
+
+def _lm(setup, z, weights, opts, *, dchi2=1e-6, free=None):
+    return _levenberg_marquardt(
+        setup.evaluator,
+        z,
+        setup.free if free is None else free,
+        weights,
+        setup.lo,
+        setup.hi,
+        max_iterations=opts.max_iterations,
+        dchi2=dchi2,
     )
-    evaluator = _Evaluator(problem, free, fd, mass, prior=0 in free and 1 in free)
 
-    def start_point(e, t_c):
-        kappa, k_r = parameters_from_restitution(e, t_c, mass)
-        v = {"kappa": kappa, "k_r": k_r, **values}
-        v.update({k: initial[k] for k in ("kappa", "k_r") if k in initial})
-        return np.clip(to_z(v), lo, hi)
 
-    rng = np.random.default_rng(seed)
-    if e0 is None:
-        # No closed form (two-racket traces): the best e on a grid, at the prior's t_c.
-        grid = np.linspace(0.3, 0.98, evaluator.rows)
-        weights = _window_weights(problem, _WINDOWS[0], evaluator.prior)
-        costs = [
-            np.sum((weights * r) ** 2) if ok else np.inf
-            for r, ok in evaluator.values([start_point(e, CONTACT_TIME_GUESS) for e in grid])
-        ]
-        e0 = float(grid[int(np.argmin(costs))])
-        e_source = "grid search (no closed form for this scene)"
-    else:
-        e_source = (
-            "closed form (" + ("flight times" if data.observe == "impacts" else "rebound heights") + ")"
-        )
-    candidates = [start_point(e0, CONTACT_TIME_GUESS)]
-    prior_t = np.geomspace(*CONTACT_TIME_PRIOR, max(starts - 1, 1) + 2)[1:-1] if starts > 1 else []
-    for t_c in prior_t:
-        e = float(np.clip(e0 * (1.0 + 0.02 * rng.standard_normal()), 0.05, 0.995))
-        candidates.append(start_point(e, float(t_c)))
-
-    # -- optional gradient stage, then LM on growing windows ----------------------------
-    optimizer = optimizer if optimizer is not None else _DEFAULT_OPTIMIZER
-    step_fn = _gradient_step(optimizer) if method == "optax" else None
-    # Every start is fitted on the first window loosely (it only has to find the basin);
-    # the best one goes on through the longer windows, then one tight pass on all data.
-    windows = _WINDOWS if data.observe == "trace" else (1.0,)
+def _run_starts(setup, candidates, rows, opts) -> list[_Point]:
+    """Every start on the first window, loosely (it only has to find the basin)."""
+    step_fn = _gradient_step(opts.optimizer, opts.gradient) if opts.method == "optax" else None
     runs = []
-    bar = _progress(len(candidates), progress)
+    bar = _progress(len(candidates), opts.progress)
     for z in candidates:
-        z = z.copy()
-        gradient_iterations = 0
-        if step_fn is not None and steps > 0:
-            z, gradient_iterations = _run_gradient_stage(step_fn, optimizer, problem, z, free, lo, hi, steps)
-        z, r, jac, cost, it, converged, why = _levenberg_marquardt(
-            evaluator,
-            z,
-            free,
-            _window_weights(problem, windows[0], evaluator.prior),
-            lo,
-            hi,
-            max_iterations=max_iterations,
-            dchi2=1e-2,
-        )
-        runs.append(
-            dict(
-                z=z,
-                r=r,
-                jac=jac,
-                cost=cost,
-                iterations=it,
-                gradient_steps=gradient_iterations,
-                converged=converged,
-                why=why,
-            )
-        )
+        z, gradient_steps = z.copy(), 0
+        if step_fn is not None and opts.steps > 0:
+            z, gradient_steps = _run_gradient_stage(step_fn, opts, setup, rows, z)
+        out = _lm(setup, z, _weights(setup, rows, _windows(setup)[0]), opts, dchi2=1e-2)
+        runs.append(_Point.from_lm(out, gradient_steps=gradient_steps))
         bar.update(1)
     bar.close()
-    best = min(runs, key=lambda run: run["cost"])
-    for fraction in windows[1:]:
-        z, r, jac, cost, it, converged, why = _levenberg_marquardt(
-            evaluator,
-            best["z"],
-            free,
-            _window_weights(problem, fraction, evaluator.prior),
-            lo,
-            hi,
-            max_iterations=max_iterations,
-            dchi2=1e-2,
+    return runs
+
+
+def _robust_pass(setup, best: _Point, rows, opts):
+    """Cauchy-weighted LM rounds, then the rows beyond the threshold are excluded."""
+    n = sum(setup.n_rows)
+    floor = 1.0 if setup.sigma_known else 0.0
+    point = best
+    scale = robust_scale(point.r[:n], rows.fitted, floor=floor)
+    if not np.any(flag_outliers(point.r[:n], rows, scale, opts.threshold)):
+        return point, rows, scale  # nothing beyond the threshold: least squares is already robust
+    for _ in range(3):
+        r = point.r[:n]
+        scale = robust_scale(r, rows.fitted, floor=floor)
+        w = _weights(setup, rows, robust=cauchy_weights(r, scale))
+        point = _Point.from_lm(
+            _lm(setup, point.z, w, opts, dchi2=1e-2),
+            iterations=point.iterations,
+            gradient_steps=point.gradient_steps,
         )
-        best = dict(
-            best,
-            z=z,
-            r=r,
-            jac=jac,
-            cost=cost,
-            iterations=best["iterations"] + it,
-            converged=converged,
-            why=why,
-        )
-    z = best["z"]
-    # The steering prior only holds the path where the data say nothing: the tight pass
-    # drops it when the data determine t_c themselves, and the uncertainty never uses it.
+    r = point.r[:n]
+    scale = robust_scale(r, rows.fitted, floor=floor)
+    rows = dataclasses.replace(rows, outlier=flag_outliers(r, rows, scale, opts.threshold))
+    return point, rows, scale
+
+
+def _final_pass(setup, best: _Point, rows, opts) -> _Point:
+    """One tight pass on all fitted rows.
+
+    The steering prior only holds the path where the data say nothing: the tight pass
+    drops it when the data determine t_c themselves, and the uncertainty never uses it.
+    """
+    ev = setup.evaluator
+    z = best.z
     use_prior = False
-    if evaluator.prior:
-        evaluator.prior = False
-        r_data, jac_data, _ = evaluator(z)
-        cov_tc, _ = covariance(jac_data, r_data, sigma_known=sigma_known)
-        contact_time = summarize(z, cov_tc, free, mass)[1]["contact_time"]
-        use_prior = not contact_time["stderr"] < 0.1 * contact_time["value"]  # sd(log t_c) < 0.1
-        evaluator.prior = use_prior
-    z, r, jac, cost, it, converged, why = _levenberg_marquardt(
-        evaluator, z, free, _window_weights(problem, 1.0, use_prior), lo, hi, max_iterations=max_iterations
+    if ev.prior:
+        ev.prior = False
+        r_data, jac_data, _ = ev(z)
+        keep = rows.fitted
+        cov_tc, _ = covariance(jac_data[keep], r_data[keep], sigma_known=setup.sigma_known)
+        derived = derived_quantities(setup, z, cov_tc)
+        t_c = derived["contact_time"]
+        use_prior = not t_c["stderr"] < 0.1 * t_c["value"]  # sd(log t_c) < 0.1
+        ev.prior = use_prior
+    point = _Point.from_lm(
+        _lm(setup, z, _weights(setup, rows), opts),
+        iterations=best.iterations,
+        gradient_steps=best.gradient_steps,
     )
     if use_prior:
-        evaluator.prior = False
-        r, jac, _ = evaluator(z)
-        cost = 0.5 * float(np.sum(r**2))
-    best = dict(best, z=z, cost=cost, iterations=best["iterations"] + it, converged=converged, why=why)
-    at_bound = [
-        PARAMETERS[i]
-        for i in free
-        if np.isclose(z[i], lo[i], rtol=0, atol=1e-9) or np.isclose(z[i], hi[i], rtol=0, atol=1e-9)
+        ev.prior = False
+        r, jac, _ = ev(point.z)
+        point = dataclasses.replace(point, r=r, jac=jac, cost=0.5 * float(np.sum((rows.fitted * r) ** 2)))
+    return point
+
+
+def alone_restitution(setup, best: _Point, rows, opts) -> list[dict]:
+    """Each file's own restitution when fitted alone (its own κ and k_r).
+
+    One batched LM from the joint optimum over a layout where κ and k_r are per file
+    (the drag held at the joint value, the steering prior on each file's t_c): the
+    files stay in one compiled call. Returns each file's `{"value", "stderr", "ci95"}`.
+    """
+    layout = Layout(
+        n_files=setup.layout.n_files, shared=("drag",), local=("kappa", "k_r", "x0", "v0", "offset")
+    )
+    joint_of = [
+        int(setup.layout.index[f, PARAMETERS.index(n)]) for n, f in ((n, f or 0) for n, f in layout.names())
     ]
-    cov, s2 = covariance(jac, r, sigma_known=sigma_known)
-    parameters, derived, identifiable, corr, names = summarize(
-        z, cov, free, mass, rel_halfwidth=rel_halfwidth
+    free = [
+        j
+        for j, (name, _) in enumerate(layout.names())
+        if (name in ("kappa", "k_r") or name in opts.nuisance) and name not in opts.freeze and name != "drag"
+    ]
+    ev = dataclasses.replace(
+        setup.evaluator, layout=layout, free=free, steps=setup.evaluator.steps[joint_of], prior=True, calls=0
     )
-    goodness = goodness_of_fit(float(np.sum(r**2)), r.size, len(free), sigma_known=sigma_known)
-    if goodness["consistent"] is False:
-        # The intervals assume a fit consistent with the noise; this one is not.
-        identifiable = {name: False for name in identifiable}
-    finite_cost = math.isfinite(best["cost"])
-    converged = bool(best["converged"] and finite_cost and not at_bound)
-    message = best["why"] if not at_bound else f"stopped at a bound: {', '.join(at_bound)}"
-    profile_result = None
-    if profile and 0 in free:
-        profile_result = _profile_kappa(evaluator, z, free, lo, hi, cov, s2, max_iterations, best["cost"])
-    return FitResult(
-        data=data,
-        problem=problem,
-        z=z,
-        free=names,
-        parameters=parameters,
-        derived=derived,
-        identifiable=identifiable,
-        correlation=corr,
-        cost=float(best["cost"]),
-        residuals=r * sigma,  # r = (prediction − data)/σ, σ = 1 when the file states none
-        chi2=float(np.sum(r**2)),
-        sigma=math.sqrt(s2) * sigma if not sigma_known else sigma,
-        sigma_source="file" if sigma_known else "residuals",
-        goodness=goodness,
-        converged=converged,
-        message=message,
-        iterations=int(best["iterations"]),
-        gradient_steps=int(best["gradient_steps"]),
-        method=method,
-        starts=[dict(cost=run["cost"], converged=run["converged"], z=run["z"]) for run in runs],
-        initial=dict(restitution=e0, contact_time=CONTACT_TIME_GUESS, source=e_source),
-        profile=profile_result,
-        rel_halfwidth=rel_halfwidth,
-        simulations=evaluator.calls,
-        wall_s=time.perf_counter() - began,
+    alone = dataclasses.replace(
+        setup, layout=layout, evaluator=ev, free=free, lo=setup.lo[joint_of], hi=setup.hi[joint_of]
     )
+    z = layout.join(list(setup.layout.split(best.z)))
+    point = _Point.from_lm(_lm(alone, z, _weights(alone, rows), opts, dchi2=1e-2))
+    ev.prior = False
+    r, jac, _ = ev(point.z)
+    keep = rows.fitted
+    cov, _ = covariance(jac[keep], r[keep], sigma_known=False)
+    setup.evaluator.calls += ev.calls
+    return [derived_quantities(alone, point.z, cov, f=f)["restitution"] for f in range(layout.n_files)]
 
 
-def _profile_kappa(evaluator, z_hat, free, lo, hi, cov, s2, max_iterations, cost_hat, points: int = 13):
+def _profile_kappa(setup, best, rows, result, opts, points: int = 13):
     """χ²(κ) with the other free parameters re-optimized: the profile likelihood of κ.
 
-    Returns the grid, Δχ² = 2(cost − cost_min)/s², and the 95% interval where
-    Δχ² ≤ 3.84 (the χ²₁ quantile), found by linear interpolation on the grid.
+    Returns the grid, Δχ² = 2(cost − cost_min)/s², the 95% interval where Δχ² ≤ 3.84
+    (the χ²₁ quantile, found by linear interpolation on the grid), and the grid points
+    whose re-optimization failed (`failed`: never taken as excluded; an interval edge
+    next to one is reported as unknown, None).
     """
-    sd = math.sqrt(cov[0, 0]) if math.isfinite(cov[0, 0]) else 5.0
+    ev = setup.evaluator
+    i_kappa = int(setup.layout.index[0, 0])
+    sd = result.parameters["kappa"]["stderr"] / max(result.kappa, 1e-300)
+    sd = sd if math.isfinite(sd) else 5.0
     half = min(3.0 * max(sd, 1e-4), 5.0)
-    grid = z_hat[0] + np.linspace(-half, half, points)
-    others = [i for i in free if i != 0]
+    grid = best.z[i_kappa] + np.linspace(-half, half, points)
+    others = [j for j in setup.free if j != i_kappa]
     costs = np.full(points, np.inf)
+    failed = np.zeros(points, bool)
     centre = points // 2
+    weights = _weights(setup, rows)
     for order in (range(centre, points), range(centre, -1, -1)):
-        z = z_hat.copy()
+        z = best.z.copy()
         for k in order:
-            z[0] = grid[k]
-            weights = np.ones_like(np.asarray(evaluator.problem.t_obs))
+            z[i_kappa] = grid[k]
             if others:
-                z, _, _, cost, _, _, _ = _levenberg_marquardt(
-                    evaluator, z, others, weights, lo, hi, max_iterations=max_iterations
-                )
+                z, _, _, cost, _, converged, _ = _lm(setup, z, weights, opts, free=others)
+                failed[k] = not (converged and math.isfinite(cost))
             else:
-                r, _, ok = evaluator(z)
-                cost = 0.5 * float(np.sum(r**2)) if ok else math.inf
+                r, _, ok = ev(z)
+                cost = 0.5 * float(np.sum((weights * r) ** 2)) if ok else math.inf
+                failed[k] = not ok
             costs[k] = cost
-    delta = 2.0 * (costs - min(cost_hat, float(np.min(costs)))) / s2
+    s2 = (result.sigma / float(setup.sigmas[0])) ** 2
+    delta = 2.0 * (costs - min(best.cost, float(np.min(costs)))) / s2
     threshold = Z95**2
-    inside = np.flatnonzero(delta <= threshold)
-    lo_k, hi_k = inside[0], inside[-1]
+    inside = np.flatnonzero((delta <= threshold) & ~failed)
+    lo_k, hi_k = (inside[0], inside[-1]) if inside.size else (centre, centre)
 
     def cross(k_in, k_out):
         if k_out < 0 or k_out >= points:
             return -math.inf if k_out < 0 else math.inf
+        if failed[k_out]:
+            return math.nan
         d0, d1 = delta[k_in], delta[k_out]
         frac = (threshold - d0) / (d1 - d0) if d1 != d0 else 0.5
         return float(grid[k_in] + frac * (grid[k_out] - grid[k_in]))
@@ -545,21 +575,39 @@ def _profile_kappa(evaluator, z_hat, free, lo, hi, cov, s2, max_iterations, cost
     return dict(
         kappa=np.exp(grid),
         delta_chi2=delta,
-        ci95=[math.exp(ci[0]) if math.isfinite(ci[0]) else 0.0, math.exp(ci[1])],
+        failed=[float(math.exp(g)) for g, bad in zip(grid, failed, strict=True) if bad],
+        ci95=[
+            (0.0 if ci[0] == -math.inf else math.exp(ci[0])) if not math.isnan(ci[0]) else math.nan,
+            math.exp(ci[1]) if not math.isnan(ci[1]) else math.nan,
+        ],
     )
 
 
 @functools.lru_cache(maxsize=8)
-def _gradient_step(optimizer):
-    # Cached per optimizer: a new jitted step for every fit would recompile the
-    # reverse-mode pass through the event mode each time.
-    @eqx.filter_jit
-    def step(problem, z, opt_state, mask):
-        def loss(z):
-            r, _ = problem.residuals(z)
-            return 0.5 * jnp.sum(r**2)
+def _gradient_step(optimizer, gradient: str):
+    """One jitted optax step on ½Σ(w·r)² over every file (cached per optimizer and mode:
+    a new jitted step for every fit would recompile the pass through the event mode).
 
-        value, grad = jax.value_and_grad(loss)(z)
+    `gradient="forward"`: each file's Jacobian by `jax.jacfwd` through the event mode in
+    forward mode (`autodiff="forward"`, six tangents per file), then g = Jᵀ(w²r);
+    `"reverse"`: `jax.grad` of the loss.
+    """
+
+    def file_gradient(problem, z6, w):
+        if gradient == "forward":
+            residuals = lambda z: problem.residuals(z)[0]  # noqa: E731
+            r, jac = residuals(z6), jax.jacfwd(residuals)(z6)
+            return 0.5 * jnp.sum((w * r) ** 2), jac.T @ (w**2 * r)
+        loss = lambda z: 0.5 * jnp.sum((w * problem.residuals(z)[0]) ** 2)  # noqa: E731
+        return jax.value_and_grad(loss)(z6)
+
+    @eqx.filter_jit
+    def step(problems, indices, weights, z, opt_state, mask):
+        value, grad = jnp.zeros(()), jnp.zeros_like(z)
+        for problem, index, w in zip(problems, indices, weights, strict=True):
+            values, grads = jax.lax.map(lambda args: file_gradient(*args), (problem, z[index], w))
+            value = value + jnp.sum(values)
+            grad = grad.at[index].add(grads)
         grad = jnp.where(mask, grad, 0.0)
         updates, opt_state = optimizer.update(grad, opt_state, z)
         return optax.apply_updates(z, jnp.where(mask, updates, 0.0)), opt_state, value
@@ -567,18 +615,32 @@ def _gradient_step(optimizer):
     return step
 
 
-def _run_gradient_stage(step, optimizer, problem, z, free, lo, hi, steps):
-    mask = jnp.zeros(len(PARAMETERS), bool).at[jnp.asarray(free)].set(True)
-    zj = jnp.asarray(z)
-    opt_state = optimizer.init(zj)
+def _run_gradient_stage(step, opts, setup, rows, z):
+    """`opts.steps` optax iterations from z; returns the best point seen and the count."""
+    mode = "forward" if opts.gradient == "forward" else "reverse"
+    problems, indices, weights = [], [], []
+    w_rows = _weights(setup, rows, _windows(setup)[0])
+    for g in setup.evaluator.groups:
+        problems.append(
+            eqx.tree_at(lambda p: p.autodiff, g.problem, mode) if mode != "reverse" else g.problem
+        )
+        indices.append(jnp.asarray(setup.layout.index[g.files]))
+        n_pad = int(np.asarray(g.problem.t_obs).shape[-1])
+        w = np.zeros((len(g.files), n_pad))
+        for k, f in enumerate(g.files):
+            w[k, : g.rows[k]] = w_rows[rows.of_file(f)]
+        weights.append(jnp.asarray(w))
+    mask = np.zeros(setup.layout.size, bool)
+    mask[setup.free] = True
+    zj, opt_state = jnp.asarray(z), opts.optimizer.init(jnp.asarray(z))
     best, best_value = np.asarray(zj), math.inf
-    for _ in range(steps):
-        new, opt_state, value = step(problem, zj, opt_state, mask)
+    for _ in range(opts.steps):
+        new, opt_state, value = step(problems, indices, weights, zj, opt_state, jnp.asarray(mask))
         value = float(value)
         if value < best_value:
             best, best_value = np.asarray(zj), value
-        zj = jnp.clip(new, lo, hi)
-    return best.copy(), steps
+        zj = jnp.clip(new, setup.lo, setup.hi)
+    return best.copy(), opts.steps
 
 
 class _NoBar:

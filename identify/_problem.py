@@ -12,9 +12,17 @@ values.
 Each observation type predicts one vector from z with the event mode (exact contact,
 every entry located), [K90 §6]:
 
-- `trace`: the position x at the sample times;
-- `impacts`: the contact onset times, plus the recording's unknown time offset;
+- `trace`: the position x at the sample times (minus the clock offset, when a video's
+  time origin is unknown: frames before the release see the ball held at x0);
+- `impacts`: the contact onset times, plus the recording's unknown time offset. Each
+  observed onset is matched to the *nearest* predicted onset (the model predicts a few
+  more onsets than observed), so a missed quiet bounce costs nothing and a spurious
+  click is one large residual that the robust pass excludes, instead of shifting every
+  later onset by one bounce;
 - `apex`: the rebound apex heights (apexes after the first impact).
+
+Two contact laws can be fitted (`LAWS`): the paper's Kelvin–Voigt law (κ in N/m, k_r in
+N·s/m) and Hunt–Crossley with n = 3/2 (κ in N/m^1.5, k_r in N·s/m^2.5).
 """
 
 from __future__ import annotations
@@ -37,6 +45,20 @@ LOG_PARAMETERS = ("kappa", "k_r", "drag")
 NUISANCE = ("drag", "x0", "v0", "offset")
 #: Units for reports.
 UNITS = {"kappa": "N/m", "k_r": "N*s/m", "drag": "s/m", "x0": "m", "v0": "m/s", "offset": "s"}
+#: The contact laws a fit can use.
+LAWS = ("kelvin-voigt", "hunt-crossley")
+#: κ and k_r units per law.
+LAW_UNITS = {
+    "kelvin-voigt": {"kappa": "N/m", "k_r": "N*s/m"},
+    "hunt-crossley": {"kappa": "N/m^1.5", "k_r": "N*s/m^2.5"},
+}
+#: Predicted onsets beyond the observed ones (room for missed bounces in the matching).
+EXTRA_ONSETS = 4
+
+
+def units(law: str) -> dict[str, str]:
+    """The report units of every parameter under `law`."""
+    return {**UNITS, **LAW_UNITS[law]}
 
 
 def to_z(values: dict[str, float]) -> np.ndarray:
@@ -68,6 +90,9 @@ class Problem(eqx.Module):
     n_events: int = eqx.field(static=True)
     tol: float = eqx.field(static=True)
     max_steps: int = eqx.field(static=True)
+    law: str = eqx.field(static=True)
+    shift_trace: bool = eqx.field(static=True)
+    autodiff: str = eqx.field(static=True)
     mass: Array
     gravity: Array
     half_gap: Array
@@ -86,23 +111,33 @@ class Problem(eqx.Module):
             drag=jnp.exp(z[2]) if self.has_drag else None,
             lower=walls[0],
             upper=walls[1],
+            law=ju.HuntCrossley(1.5) if self.law == "hunt-crossley" else ju.KelvinVoigt(),
         )
 
     def predict(self, z) -> tuple[Array, Array]:
         """The predicted observations and whether the run succeeded."""
         ball = self.ball(z)
         y0 = jnp.stack([z[3], z[4]])
-        common = dict(solver="event", rtol=self.tol, atol=self.tol, max_steps=self.max_steps, throw=False)
+        common = dict(
+            solver="event",
+            rtol=self.tol,
+            atol=self.tol,
+            max_steps=self.max_steps,
+            throw=False,
+            autodiff=self.autodiff,
+        )
         if self.observe == "trace":
-            sol = ju.simulate(ball, y0, self.t_obs[-1], ts=self.t_obs, outputs=("x",), **common)
+            ts = jnp.maximum(self.t_obs - z[5], 0.0) if self.shift_trace else self.t_obs
+            sol = ju.simulate(ball, y0, ts[-1], ts=ts, outputs=("x",), **common)
             pred = sol.ys["x"]
         else:
             ts = jnp.stack([jnp.zeros(()), self.horizon])
             sol = ju.simulate(ball, y0, self.horizon, ts=ts, outputs=("x",), **common)
-            onsets = ju.impact_times(sol, self.n_events + 1)
             if self.observe == "impacts":
-                pred = onsets[: self.n_events] + z[5]
+                onsets = ju.impact_times(sol, self.n_events + EXTRA_ONSETS) + z[5]
+                pred = _nearest(jnp.where(jnp.isfinite(onsets), onsets, jnp.inf), self.y_obs)
             else:
+                onsets = ju.impact_times(sol, 1)
                 times, heights = ju.apexes(sol, self.n_events + 2)
                 # Rebound apexes only: skip a release apex at or before the first impact.
                 skip = jnp.sum(times <= onsets[0])
@@ -117,15 +152,36 @@ class Problem(eqx.Module):
         return jnp.where(jnp.isfinite(r), r, 1e6), ok
 
 
+def _nearest(predicted: Array, observed: Array) -> Array:
+    """For each observed time, the nearest predicted time (inf where none exists)."""
+    gap = jnp.abs(predicted[None, :] - observed[:, None])
+    return jnp.take(predicted, jnp.argmin(gap, axis=1))
+
+
 @eqx.filter_jit
 def evaluate_rows(problem: Problem, zs) -> tuple[Array, Array]:
-    """Residuals for each row of `zs` (rows, 6), in one compiled sequential map.
+    """Residuals for each row of `zs`, in one compiled sequential map.
 
-    This is the package's jitted entry point: the fit calls it with a fixed number of
-    rows (the current point and its finite-difference neighbours), so only the
-    first call compiles.
+    `problem` is one data set with `zs` of shape (rows, 6), or a stack of data sets
+    of one structure (`stack_problems`: every array leaf with a leading file axis)
+    with `zs` of shape (files, rows, 6). This is the package's jitted entry point:
+    the fit calls it with a fixed number of rows (the current point and its
+    finite-difference neighbours), so only the first call compiles.
     """
-    return jax.lax.map(problem.residuals, zs)
+    if zs.ndim == 2:
+        return jax.lax.map(problem.residuals, zs)
+    # One flat map over (file, row) pairs: a nested map would keep the inner solves
+    # from compiling into one loop kernel each.
+    files, rows = zs.shape[:2]
+    flat = jax.tree.map(lambda leaf: jnp.repeat(leaf, rows, axis=0), problem)
+    r, ok = jax.lax.map(lambda pair: pair[0].residuals(pair[1]), (flat, zs.reshape(files * rows, -1)))
+    return r.reshape(files, rows, -1), ok.reshape(files, rows)
+
+
+def stack_problems(problems: list[Problem]) -> Problem:
+    """One `Problem` whose array leaves stack those of `problems` (all of one structure:
+    the same static fields and observation counts) along a leading file axis."""
+    return jax.tree.map(lambda *leaves: jnp.stack(leaves), *problems)
 
 
 def _device(value) -> Array:
@@ -134,9 +190,23 @@ def _device(value) -> Array:
 
 
 def make_problem(
-    data, *, tol: float = 1e-10, has_drag: bool, sigma: float = 1.0, horizon: float | None = None
+    data,
+    *,
+    tol: float = 1e-10,
+    has_drag: bool,
+    sigma: float = 1.0,
+    horizon: float | None = None,
+    law: str = "kelvin-voigt",
+    shift_trace: bool = False,
+    rows: int | None = None,
+    max_steps: int | None = None,
 ):
-    """A `Problem` for a loaded `identify.Dataset`."""
+    """A `Problem` for a loaded `identify.Dataset`.
+
+    `rows` pads the observations to that many (repeating the last one; the fit gives
+    padded rows no weight) so that data sets of one structure stack into one batch;
+    `max_steps` overrides the step budget (a batch uses its largest).
+    """
     if data.observe == "trace":
         y_obs, t_obs, n_events = data.x, data.t, 0
     elif data.observe == "impacts":
@@ -147,14 +217,23 @@ def make_problem(
         n_events = len(data.h)
     if horizon is None:
         horizon = float(t_obs[-1]) if data.observe == "trace" else 1.0
-    max_steps = int(min(max(2048, 200 * (n_events + 4) + 600 * horizon), 16384))
+    if max_steps is None:
+        max_steps = default_max_steps(n_events, horizon)
+    if rows is not None and rows > len(y_obs):
+        pad = rows - len(y_obs)
+        y_obs = np.concatenate([y_obs, np.repeat(y_obs[-1:], pad)])
+        t_obs = np.concatenate([t_obs, np.repeat(t_obs[-1:], pad)])
+        n_events = rows if n_events else 0
     return Problem(
         scene=data.scene,
         observe=data.observe,
         has_drag=has_drag,
         n_events=n_events,
         tol=float(tol),
-        max_steps=max_steps,
+        max_steps=int(max_steps),
+        law=law,
+        shift_trace=bool(shift_trace),
+        autodiff="reverse",
         mass=_device(data.mass),
         gravity=_device(data.gravity),
         half_gap=_device(0.0 if data.gap is None else data.gap / 2),
@@ -163,3 +242,8 @@ def make_problem(
         sigma=_device(sigma),
         horizon=_device(horizon),
     )
+
+
+def default_max_steps(n_events: int, horizon: float) -> int:
+    """The step budget of one run: room for every bounce and the flight between them."""
+    return int(min(max(2048, 200 * (n_events + 4) + 600 * horizon), 16384))

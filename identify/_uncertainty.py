@@ -136,8 +136,19 @@ def _entry(value: float, sd: float, *, log: bool, clip: tuple[float, float] | No
     return {"value": value, "stderr": stderr, "ci95": [lo, hi]}
 
 
-def summarize(z: np.ndarray, cov: np.ndarray, free: list[int], mass: float, *, rel_halfwidth: float = 0.25):
+def summarize(
+    z: np.ndarray,
+    cov: np.ndarray,
+    free: list[int],
+    mass: float,
+    *,
+    rel_halfwidth: float = 0.25,
+    derived=restitution_and_contact_time,
+):
     """Estimates with stderr and CIs, derived e and t_c, correlation and verdicts.
+
+    `derived(log κ, log k_r, mass)` gives (e, t_c, ∂e/∂(log κ, log k_r), ∂log t_c/∂(…))
+    for the contact law (default: the Kelvin–Voigt closed forms).
 
     **Returns:** `(parameters, derived, identifiable, correlation, names)`: dicts of
     `{"value", "stderr", "ci95"}` entries in physical units (a parameter that was not
@@ -152,12 +163,12 @@ def summarize(z: np.ndarray, cov: np.ndarray, free: list[int], mass: float, *, r
         value = math.exp(z[i]) if log else float(z[i])
         sd = math.sqrt(full[i, i]) if full[i, i] >= 0 else math.nan
         parameters[name] = _entry(value, sd, log=log)
-    e, t_c, ge, gt = restitution_and_contact_time(float(z[0]), float(z[1]), mass)
+    e, t_c, ge, gt = derived(float(z[0]), float(z[1]), mass)
     sub = full[:2, :2]
     with np.errstate(invalid="ignore"):
         var_e = float(ge @ sub @ ge) if np.all(np.isfinite(sub)) else math.inf
         var_t = float(gt @ sub @ gt) if np.all(np.isfinite(sub)) else math.inf
-    derived = {
+    quantities = {
         "restitution": _entry(e, math.sqrt(max(var_e, 0.0)), log=False, clip=(0.0, 1.0)),
         "contact_time": _entry(t_c, math.sqrt(max(var_t, 0.0)), log=True),
     }
@@ -171,12 +182,12 @@ def summarize(z: np.ndarray, cov: np.ndarray, free: list[int], mass: float, *, r
     identifiable = {
         "kappa": 0 in free and verdict(parameters["kappa"]),
         "k_r": 1 in free and verdict(parameters["k_r"]),
-        "restitution": (0 in free or 1 in free) and verdict(derived["restitution"]),
-        "contact_time": (0 in free or 1 in free) and verdict(derived["contact_time"]),
+        "restitution": (0 in free or 1 in free) and verdict(quantities["restitution"]),
+        "contact_time": (0 in free or 1 in free) and verdict(quantities["contact_time"]),
     }
     with np.errstate(invalid="ignore", divide="ignore"):
         sd = np.sqrt(np.diag(cov))
         corr = cov / np.outer(sd, sd)
     corr = np.where(np.isfinite(corr), corr, np.nan)
     names = [PARAMETERS[i] for i in free]
-    return parameters, derived, identifiable, corr, names
+    return parameters, quantities, identifiable, corr, names

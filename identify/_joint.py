@@ -1,0 +1,271 @@
+"""Several data sets in one fit: the joint parameter vector and its batched evaluator.
+
+**Layout.** Each data set f is predicted from its own 6-vector
+z_f = (log κ, log k_r, log k_drag, x0, v0, offset) (`PARAMETERS`). In a joint fit some
+of these entries are *shared* (one value for every file: the contact parameters and
+the drag) and the others are *local* (one value per file: the release state and the
+clock offset). The joint vector is
+
+    z = (shared entries, in PARAMETERS order) + (file 0's local entries) + (file 1's …) + …
+
+so a fit of one file with the default layout has exactly z = z_0. `Layout.index[f]`
+holds the six joint indices that make z_f = z[index[f]].
+
+**Evaluation.** Data sets of one structure (scene, observation type, law) form a
+*group*; a group's problems are padded to the same number of observations and
+stacked, and one compiled call (`evaluate_rows`) runs every file's point and
+finite-difference neighbours in a sequential map: a fit of 30 files compiles once,
+not 30 times. A file's neighbours only perturb the joint entries that file depends
+on, so a file costs 1 + 2q runs (q: its free, non-shift entries) and the Jacobian is
+block-sparse: shared columns have a block from every file, local columns only from
+their own.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import jax
+import numpy as np
+
+from ._initial import CONTACT_TIME_GUESS
+from ._problem import PARAMETERS, Problem, evaluate_rows, stack_problems
+
+#: Parameters that shift every prediction by their own value (impact onsets + offset):
+#: their Jacobian column is 1/σ exactly, so they take no runs.
+SHIFTS = ("offset",)
+#: sd of log t_c in the steering prior: the 0.5–2 ms prior as ±2 sd around 1 ms.
+PRIOR_SD = math.log(2.0) / 2.0
+
+
+@dataclasses.dataclass(frozen=True)
+class Layout:
+    """Which of the six entries are shared across files and which are per file.
+
+    **Fields:** `n_files`; `shared`, the names with one joint entry; `local`, the names
+    with one entry per file (together, all of `PARAMETERS`).
+    """
+
+    n_files: int
+    shared: tuple[str, ...] = ("kappa", "k_r", "drag")
+    local: tuple[str, ...] = ("x0", "v0", "offset")
+
+    @property
+    def size(self) -> int:
+        """Length of the joint vector."""
+        return len(self.shared) + self.n_files * len(self.local)
+
+    @property
+    def index(self) -> np.ndarray:
+        """(files, 6) joint indices: z_f = z[index[f]]."""
+        out = np.zeros((self.n_files, len(PARAMETERS)), dtype=int)
+        for f in range(self.n_files):
+            for i, name in enumerate(PARAMETERS):
+                if name in self.shared:
+                    out[f, i] = self.shared.index(name)
+                else:
+                    out[f, i] = len(self.shared) + f * len(self.local) + self.local.index(name)
+        return out
+
+    def names(self) -> list[tuple[str, int | None]]:
+        """(parameter name, file or None when shared) of every joint entry."""
+        out = [(n, None) for n in self.shared]
+        for f in range(self.n_files):
+            out += [(n, f) for n in self.local]
+        return out
+
+    def join(self, per_file: list[np.ndarray]) -> np.ndarray:
+        """A joint vector from per-file 6-vectors (shared entries from file 0)."""
+        z = np.zeros(self.size)
+        for f, zf in enumerate(per_file):
+            z[self.index[f]] = zf
+        return z
+
+    def split(self, z: np.ndarray) -> np.ndarray:
+        """(files, 6): every file's z_f."""
+        return np.asarray(z)[self.index]
+
+    def indices_of(self, name: str) -> list[int]:
+        """The joint entries of one parameter (one if shared, one per file if local)."""
+        return sorted({int(i) for i in self.index[:, PARAMETERS.index(name)]})
+
+
+@dataclasses.dataclass
+class Group:
+    """Files of one structure, stacked for one compiled call."""
+
+    files: list[int]
+    problem: Problem  # stacked: a leading file axis on every array leaf
+    rows: list[int]  # each file's real observation count (the rest is padding)
+
+
+def make_groups(problems: list[Problem], rows: list[int]) -> list[Group]:
+    """Stack problems that share their static structure (already padded alike)."""
+    keys: dict = {}
+    for f, p in enumerate(problems):
+        key = (p.scene, p.observe, p.has_drag, p.n_events, p.tol, p.max_steps, p.law, p.shift_trace)
+        key = key + (int(np.asarray(p.t_obs).shape[0]),)
+        keys.setdefault(key, []).append(f)
+    return [
+        Group(files=fs, problem=stack_problems([problems[f] for f in fs]), rows=[rows[f] for f in fs])
+        for fs in keys.values()
+    ]
+
+
+@dataclasses.dataclass
+class JointEvaluator:
+    """r and J of every file at a joint point: one compiled call per group.
+
+    **Fields:** the `groups`, the `layout`, the `free` joint indices (the Jacobian's
+    columns, in this order), the finite-difference `steps` per joint entry, the files'
+    `masses`, the `prior` switch and law (the steering prior on log t_c, one row per
+    distinct κ/k_r pair), and `calls` (compiled calls made).
+
+    Residual rows are every file's real observations in file order, then the prior's
+    rows when `prior` is on.
+    """
+
+    groups: list[Group]
+    layout: Layout
+    free: list[int]
+    steps: np.ndarray
+    masses: np.ndarray
+    sigmas: np.ndarray
+    law: str = "kelvin-voigt"
+    prior: bool = True
+    speed: float = 1.0
+    calls: int = 0
+
+    @property
+    def n_data(self) -> int:
+        return int(sum(sum(g.rows) for g in self.groups))
+
+    def _file_columns(self, f: int) -> tuple[list[int], list[int]]:
+        """Free joint entries file f depends on: (differenced, shifts)."""
+        idx = self.layout.index[f]
+        fd, shifts = [], []
+        for j in self.free:
+            where = np.flatnonzero(idx == j)
+            if where.size:
+                (fd if PARAMETERS[where[0]] not in SHIFTS else shifts).append(j)
+        return fd, shifts
+
+    @property
+    def rows(self) -> int:
+        """Runs per file in a compiled call: the point and two neighbours per differenced entry."""
+        return 1 + 2 * max(len(self._file_columns(f)[0]) for f in range(self.layout.n_files))
+
+    @property
+    def differenced(self) -> list[int]:
+        """The free joint entries whose columns are central differences."""
+        return [j for j in self.free if self.layout.names()[j][0] not in SHIFTS]
+
+    def _prior_pairs(self) -> list[tuple[int, int, int]]:
+        """(file, κ index, k_r index) of every distinct contact-parameter pair."""
+        seen, out = set(), []
+        for f in range(self.layout.n_files):
+            pair = (int(self.layout.index[f, 0]), int(self.layout.index[f, 1]))
+            if pair not in seen:
+                seen.add(pair)
+                out.append((f, *pair))
+        return out
+
+    def prior_rows(self, z: np.ndarray) -> np.ndarray:
+        """The steering prior's residuals (log t_c − log t_c,prior)/sd."""
+        out = []
+        for f, ik, ir in self._prior_pairs():
+            t_c = contact_time_of(self.law, z[ik], z[ir], float(self.masses[f]), self.speed)
+            out.append((math.log(max(t_c, 1e-300)) - math.log(CONTACT_TIME_GUESS)) / PRIOR_SD)
+        return np.asarray(out)
+
+    def _run(self, per_file_rows: list[np.ndarray]) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """Residuals (rows, n_f) and ok (rows,) of every file for its (rows, 6) points."""
+        res: list = [None] * self.layout.n_files
+        oks: list = [None] * self.layout.n_files
+        for g in self.groups:
+            zs = np.stack([per_file_rows[f] for f in g.files])
+            r, ok = evaluate_rows(g.problem, jax.device_put(zs))
+            r, ok = np.asarray(r), np.asarray(ok)
+            for k, f in enumerate(g.files):
+                res[f], oks[f] = r[k, :, : g.rows[k]], ok[k]
+        self.calls += 1
+        return res, oks
+
+    def __call__(self, z: np.ndarray):
+        """(r, J, ok) at the joint point z; J has one column per `free` entry."""
+        z = np.asarray(z, dtype=float)
+        rows = self.rows
+        points, plans = [], []
+        for f in range(self.layout.n_files):
+            idx = self.layout.index[f]
+            base = z[idx]
+            fd, shifts = self._file_columns(f)
+            pts = np.repeat(base[None, :], rows, axis=0)
+            for k, j in enumerate(fd):
+                pts[1 + 2 * k, idx == j] += self.steps[j]
+                pts[2 + 2 * k, idx == j] -= self.steps[j]
+            points.append(pts)
+            plans.append((fd, shifts))
+        res, oks = self._run(points)
+        blocks_r, blocks_j, ok = [], [], True
+        for f, (fd, shifts) in enumerate(plans):
+            r = res[f]
+            jac = np.zeros((r.shape[1], len(self.free)))
+            for k, j in enumerate(fd):
+                jac[:, self.free.index(j)] = (r[1 + 2 * k] - r[2 + 2 * k]) / (2 * self.steps[j])
+            for j in shifts:
+                # A shift: r = (prediction + value − data)/σ, so ∂r/∂value = 1/σ.
+                jac[:, self.free.index(j)] = 1.0 / self.sigmas[f]
+            blocks_r.append(r[0])
+            blocks_j.append(jac)
+            ok = ok and bool(np.all(oks[f][: 1 + 2 * len(fd)]))
+        r = np.concatenate(blocks_r)
+        jac = np.concatenate(blocks_j)
+        if self.prior:
+            r = np.concatenate([r, self.prior_rows(z)])
+            jac = np.concatenate([jac, self._prior_jacobian(z)])
+        return r, jac, ok
+
+    def _prior_jacobian(self, z: np.ndarray) -> np.ndarray:
+        rows = []
+        for _, ik, ir in self._prior_pairs():
+            row = np.zeros(len(self.free))
+            for j in (ik, ir):
+                if j in self.free:
+                    h = 1e-6
+                    zp, zm = z.copy(), z.copy()
+                    zp[j] += h
+                    zm[j] -= h
+                    row[self.free.index(j)] = (self.prior_rows(zp) - self.prior_rows(zm))[len(rows)] / (2 * h)
+            rows.append(row)
+        return np.asarray(rows).reshape(len(rows), len(self.free))
+
+    def values(self, zs: list[np.ndarray]) -> list[tuple[np.ndarray, bool]]:
+        """Residuals at several joint points (batched by the compiled row count)."""
+        rows = self.rows
+        out = []
+        for k in range(0, len(zs), rows):
+            chunk = [np.asarray(z, dtype=float) for z in zs[k : k + rows]]
+            padded = chunk + [chunk[-1]] * (rows - len(chunk))
+            points = [np.stack([z[self.layout.index[f]] for z in padded]) for f in range(self.layout.n_files)]
+            res, oks = self._run(points)
+            for i, z in enumerate(chunk):
+                r = np.concatenate([res[f][i] for f in range(self.layout.n_files)])
+                if self.prior:
+                    r = np.concatenate([r, self.prior_rows(z)])
+                out.append((r, bool(all(oks[f][i] for f in range(self.layout.n_files)))))
+        return out
+
+
+def contact_time_of(law: str, log_kappa: float, log_k_r: float, mass: float, speed: float) -> float:
+    """Contact time, s, of the law at (κ, k_r): Kelvin–Voigt's π/ω_d (inf when
+    overdamped); Hunt–Crossley's undamped Hertz time at impact speed `speed` (m/s)."""
+    kappa, k_r = math.exp(log_kappa), math.exp(log_k_r)
+    if law == "hunt-crossley":
+        n1 = 2.5
+        dmax = (n1 * mass * speed**2 / (2.0 * kappa)) ** (1.0 / n1)
+        integral = math.sqrt(math.pi) * math.gamma(1.0 + 1.0 / n1) / math.gamma(0.5 + 1.0 / n1)
+        return 2.0 * dmax / speed * integral
+    omega2 = kappa / mass - (k_r / (2 * mass)) ** 2
+    return math.pi / math.sqrt(omega2) if omega2 > 0 else math.inf

@@ -1,0 +1,180 @@
+"""Outliers, missed bounces, honest noise and held-out rows: what real recordings need.
+
+**Robust pass.** A spurious onset (an echo, a rattle, a handled phone), a missed quiet
+bounce or a mistracked video frame must not wreck a fit. The fit first minimises a
+Cauchy loss Σ ρ(r/(c·s)) by iteratively reweighted Levenberg–Marquardt: each round
+recomputes the weights w = 1/√(1 + (r/(c·s))²) (c = 2.385, the Cauchy loss's 95%
+efficiency constant; s, the robust residual scale 1.4826·median|r|, in units of the
+stated σ and never below 1 when the file states σ). Rows with |r| > `threshold`·s
+(default 4) are then excluded, and the fit is redone by plain least squares on the
+rest. `keep_outliers=True` skips both.
+
+**Missed bounces.** A ball's flights only get shorter; an observed interval longer
+than 1.25× the one before means a bounce between them went unheard. Impact onsets are
+matched to the nearest predicted onset, so such a gap costs nothing; it is reported.
+
+**Honest noise.** With a stated σ, the χ² test says whether the residuals agree. When
+they scatter more (p < 1e-3) the stated σ is replaced by the residual scatter for the
+intervals, and the report says so in words: for impacts, bounce-to-bounce variation
+of the restitution (spin, the contact point, the seam: 0.2–0.5% for a real ball) adds
+a scatter of the *intervals* of about δe/e times the interval. A σ overstated by a
+large factor (p > 1 − 1e-3, reduced χ² ≪ 1) is flagged too.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from ._uncertainty import P_INCONSISTENT, goodness_of_fit
+
+#: The Cauchy loss's scale constant (95% asymptotic efficiency on Gaussian noise).
+CAUCHY_C = 2.385
+#: Default outlier threshold, in robust residual scales.
+THRESHOLD = 4.0
+#: An interval this much longer than the previous one means a missed bounce.
+MISSED_RATIO = 1.25
+
+
+def robust_scale(r: np.ndarray, used: np.ndarray, *, floor: float) -> float:
+    """1.4826·median|r| over the used rows (a σ estimate that ignores outliers), ≥ floor."""
+    rr = np.abs(r[used])
+    if rr.size == 0:
+        return max(floor, 1e-300)
+    return max(1.4826 * float(np.median(rr)), floor, 1e-300)
+
+
+def cauchy_weights(r: np.ndarray, scale: float) -> np.ndarray:
+    """IRLS weights √ρ'(r²) of the Cauchy loss with scale c·s (applied to residuals)."""
+    return 1.0 / np.sqrt(1.0 + (r / (CAUCHY_C * scale)) ** 2)
+
+
+@dataclasses.dataclass
+class Rows:
+    """Which data rows a stage uses, per file, as boolean masks over the concatenated rows.
+
+    **Fields:** `offsets`, the first row of each file; `holdout`, rows kept out of the fit
+    (the last fraction of each file); `outlier`, rows excluded by the robust pass.
+    """
+
+    offsets: np.ndarray
+    holdout: np.ndarray
+    outlier: np.ndarray
+
+    @classmethod
+    def make(cls, n_rows: list[int], holdout: float) -> Rows:
+        offsets = np.concatenate([[0], np.cumsum(n_rows)])
+        held = np.zeros(int(offsets[-1]), bool)
+        for f, n in enumerate(n_rows):
+            keep = n - int(math.floor(holdout * n + 1e-9)) if holdout > 0 else n
+            held[offsets[f] + keep : offsets[f + 1]] = True
+        return cls(offsets=offsets, holdout=held, outlier=np.zeros_like(held))
+
+    @property
+    def fitted(self) -> np.ndarray:
+        return ~self.holdout & ~self.outlier
+
+    def of_file(self, f: int) -> slice:
+        return slice(int(self.offsets[f]), int(self.offsets[f + 1]))
+
+
+def flag_outliers(r: np.ndarray, rows: Rows, scale: float, threshold: float) -> np.ndarray:
+    """Rows of the fitted part with |r| > threshold·scale (r in σ units)."""
+    return ~rows.holdout & (np.abs(r) > threshold * scale)
+
+
+def missed_bounces(times: np.ndarray, keep: np.ndarray) -> list[dict]:
+    """Gaps in a file's onset times (s) where a bounce went unheard.
+
+    Only kept rows count; returns `{"after_row", "before_row", "interval", "previous"}`
+    for each interval more than `MISSED_RATIO` times the one before.
+    """
+    idx = np.flatnonzero(keep)
+    out = []
+    for a, b, c in zip(idx[:-2], idx[1:-1], idx[2:], strict=True):
+        previous, interval = times[b] - times[a], times[c] - times[b]
+        if interval > MISSED_RATIO * previous:
+            out.append(
+                {
+                    "after_row": int(b),
+                    "before_row": int(c),
+                    "interval": float(interval),
+                    "previous": float(previous),
+                }
+            )
+    return out
+
+
+def noise_statement(d_observe: str, sigma_known: bool, stated, scatter: float, goodness: dict, times) -> dict:
+    """The stated σ against the residual scatter, in words and numbers.
+
+    **Returns:** `{"stated", "scatter", "unit", "verdict", "text"}`; verdict is one of
+    `"estimated"` (no σ stated), `"consistent"`, `"understated"` (the residuals scatter
+    more: the intervals use the scatter) or `"overstated"` (reduced χ² ≪ 1).
+    """
+    unit = "s" if d_observe == "impacts" else "m"
+    show = (lambda v: f"{v * 1e3:.3g} ms") if unit == "s" else (lambda v: f"{v * 1e3:.3g} mm")
+    if not sigma_known:
+        verdict = "estimated"
+        text = f"no noise stated: sigma = residual scatter {show(scatter)}"
+    elif goodness["consistent"]:
+        verdict = "consistent"
+        text = f"residual scatter {show(scatter)}, consistent with the stated {show(stated)}"
+    elif goodness["p_value"] is not None and goodness["p_value"] < P_INCONSISTENT:
+        verdict = "understated"
+        text = f"residual scatter {show(scatter)} against a stated {show(stated)}"
+        if d_observe == "impacts" and len(times) > 2:
+            variation = scatter * math.sqrt(2.0) / float(np.mean(np.diff(times)))
+            text += f": the bounce-to-bounce variation of e is about {variation:.2%}"
+        text += "; the intervals use the residual scatter"
+    else:
+        verdict = "consistent"
+        text = f"residual scatter {show(scatter)}, consistent with the stated {show(stated)}"
+    if sigma_known and _overstated(goodness):
+        verdict = "overstated"
+        text = (
+            f"residual scatter {show(scatter)} against a stated {show(stated)}: the stated noise looks "
+            f"{stated / max(scatter, 1e-300):.3g}x too large (reduced chi-square {goodness['reduced_chi2']:.3g}); "
+            "the intervals use the stated noise and are too wide"
+        )
+    return {"stated": stated, "scatter": scatter, "unit": unit, "verdict": verdict, "text": text}
+
+
+def _overstated(goodness: dict) -> bool:
+    """Reduced χ² so small that the chance of it under the stated σ is below 1e-3."""
+    p = goodness["p_value"]
+    return p is not None and p > 1.0 - P_INCONSISTENT and goodness["reduced_chi2"] < 0.5
+
+
+def holdout_summary(
+    residuals: np.ndarray, rows: Rows, sigma: np.ndarray, fraction: float, unit: str, variance: np.ndarray
+) -> dict:
+    """The held-out rows' prediction errors (data units) and whether they are within the noise.
+
+    `variance` is each row's predictive variance in units of its σ² (1 + JΣJᵀ: the noise
+    plus the fitted parameters' uncertainty propagated to that row). Rows beyond
+    `THRESHOLD` predictive sd are outliers there too and are counted, not averaged. The
+    prediction is *within the noise* when the χ² of the rest against their predictive
+    variance passes the test at p ≥ 1e-3.
+    """
+    held = rows.holdout
+    errs = residuals[held]
+    scaled = errs / (sigma[held] * np.sqrt(variance[held]))
+    inlier = np.abs(scaled) <= THRESHOLD
+    use = errs[inlier]
+    if use.size == 0:
+        return {"fraction": fraction, "rows": int(held.sum()), "rms": None, "max": None, "within_noise": None}
+    g = goodness_of_fit(float(np.sum(scaled[inlier] ** 2)), int(use.size), 0, sigma_known=True)
+    return {
+        "fraction": fraction,
+        "rows": int(held.sum()),
+        "outliers": int((~inlier).sum()),
+        "rms": float(np.sqrt(np.mean(use**2))),
+        "max": float(np.max(np.abs(use))),
+        "predicted_sd": float(np.sqrt(np.mean((sigma[held] ** 2 * variance[held])[inlier]))),
+        "unit": unit,
+        "p_value": g["p_value"],
+        "within_noise": bool(g["consistent"]),
+    }

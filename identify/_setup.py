@@ -1,0 +1,251 @@
+"""A fit's set-up: data sets in, the joint problem, its bounds and its start points out.
+
+One or several data sets are fitted together (`Layout`): κ, k_r (and the drag, when
+fitted) are shared; each file keeps its own release height x0, release speed v0 and
+clock offset. The start is the closed form of `identify._initial` (e from successive
+rebound heights or flight times, t_c from the 0.5–2 ms prior, then (κ, k_r) from the
+law's inverse), per file for its nuisance values and from the median over files for
+the shared e.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from ._initial import CONTACT_TIME_GUESS, CONTACT_TIME_PRIOR, first_impact_time, initial_restitution
+from ._joint import JointEvaluator, Layout, make_groups
+from ._kelvin_voigt import parameters_from_restitution
+from ._problem import LOG_PARAMETERS, PARAMETERS, default_max_steps, make_problem, to_z
+
+_FD_STEP = {"kappa": 1e-4, "k_r": 1e-4, "drag": 1e-4, "x0": 1e-6, "v0": 1e-5, "offset": 1e-6}
+DEFAULT_BOUNDS = {
+    "kappa": (1.0, 1e12),
+    "k_r": (1e-12, 1e4),
+    "drag": (1e-6, 10.0),
+    "x0": (-1e3, 1e3),
+    "v0": (-1e3, 1e3),
+    "offset": (-1e4, 1e4),
+}
+
+
+@dataclasses.dataclass
+class Setup:
+    """Everything a fit's stages share (host side).
+
+    **Fields:** the `datasets`; the contact `law`; the joint `layout`; the `evaluator`;
+    the `free` joint entries; the bounds `lo`, `hi` (joint, in z units); whether the
+    noise σ is the files' (`sigma_known`) and each file's σ (`sigmas`, data units; 1
+    when estimated); each file's observation `times` (s; trace and impacts sample or
+    onset times, apex indices otherwise) and first-guess `values`; the start's `e0`,
+    its `e_source` and the typical impact `speed` (m/s) of the data.
+    """
+
+    datasets: list
+    law: str
+    layout: Layout
+    evaluator: JointEvaluator
+    free: list[int]
+    lo: np.ndarray
+    hi: np.ndarray
+    sigma_known: bool
+    sigmas: np.ndarray
+    times: list[np.ndarray]
+    values: list[dict]
+    e0: float | None
+    e_source: str
+    speed: float
+    initial: dict
+
+    @property
+    def n_rows(self) -> list[int]:
+        return [len(t) for t in self.times]
+
+
+def _noise(datasets) -> tuple[bool, np.ndarray]:
+    stated = [d.noise for d in datasets]
+    if all(s is not None for s in stated):
+        return True, np.asarray(stated, dtype=float)
+    if len({d.observe for d in datasets}) > 1:
+        raise ValueError(
+            "a joint fit of different observation types needs the noise of every file (the residual "
+            f"scale cannot be shared between metres and seconds); missing in: {_missing_noise(datasets)}"
+        )
+    return False, np.ones(len(datasets))
+
+
+def _missing_noise(datasets) -> str:
+    return ", ".join(d.path or f"data set {i}" for i, d in enumerate(datasets) if d.noise is None)
+
+
+def _observation_times(d) -> np.ndarray:
+    if d.observe in ("trace", "impacts"):
+        return np.asarray(d.t, dtype=float)
+    return np.asarray(d.t if d.t is not None else np.arange(len(d.h)), dtype=float)
+
+
+def _file_values(d, initial: dict, nuisance: tuple[str, ...]) -> tuple[dict, float | None]:
+    """A file's first-guess nuisance values and its prediction horizon (s)."""
+    values = dict(
+        drag=initial.get("drag", d.drag if d.drag > 0 else 0.12),
+        x0=initial.get("x0", d.x0),
+        v0=initial.get("v0", d.v0),
+        offset=initial.get("offset", 0.0),
+    )
+    horizon = None
+    g = d.gravity
+    if d.observe == "impacts":
+        fall = first_impact_time(d.x0, d.v0, g) if d.scene == "drop" else 0.0
+        if "offset" in nuisance and "offset" not in initial:
+            values["offset"] = float(d.t[0]) - fall
+        # Just past the last observed impact (a longer run only adds ever shorter bounces).
+        last_flight = float(d.t[-1] - d.t[-2])
+        horizon = float(d.t[-1]) - values["offset"] + 0.5 * last_flight + 0.05
+    elif d.observe == "apex":
+        fall = first_impact_time(d.x0, d.v0, g) if d.scene == "drop" else 0.0
+        flights = 2.0 * np.sqrt(2.0 * np.asarray(d.h) / g)
+        horizon = fall + 1.05 * float(np.sum(flights)) + 0.05
+        if d.t is not None:
+            horizon = max(horizon, float(d.t[-1]) + 0.6 * float(flights[-1]) + 0.05)
+    elif "offset" in nuisance and "offset" not in initial:
+        values["offset"] = 0.0
+    return values, horizon
+
+
+def _typical_speed(datasets) -> float:
+    """The median first impact speed of the drops (m/s), for laws whose e depends on it."""
+    speeds = []
+    for d in datasets:
+        if d.scene == "drop":
+            speeds.append(math.sqrt(max(d.v0**2 + 2.0 * d.gravity * max(d.x0, 0.0), 1e-12)))
+        else:
+            speeds.append(max(abs(d.v0), 1.0))
+    return float(np.median(speeds))
+
+
+def build(datasets, *, law, nuisance, freeze, initial, bounds, tol) -> Setup:
+    """The joint problem of `datasets` under `law`, from validated arguments."""
+    sigma_known, sigmas = _noise(datasets)
+    has_drag = any(d.drag > 0 for d in datasets) or "drag" in nuisance
+    layout = Layout(n_files=len(datasets))
+    per_file = [_file_values(d, initial, nuisance) for d in datasets]
+    rows = [d.num_rows for d in datasets]
+    shift_trace = "offset" in nuisance
+    problems = _padded_problems(datasets, per_file, rows, law, has_drag, sigmas, tol, shift_trace)
+    free = [
+        j
+        for j, (name, _) in enumerate(layout.names())
+        if (name in ("kappa", "k_r") or name in nuisance) and name not in freeze
+    ]
+    bounds = {**DEFAULT_BOUNDS, **bounds}
+    lo6, hi6 = to_z({n: bounds[n][0] for n in PARAMETERS}), to_z({n: bounds[n][1] for n in PARAMETERS})
+    names = [n for n, _ in layout.names()]
+    lo = np.array([lo6[PARAMETERS.index(n)] for n in names])
+    hi = np.array([hi6[PARAMETERS.index(n)] for n in names])
+    steps = np.array(
+        [
+            _FD_STEP[n] * (1.0 if n in LOG_PARAMETERS else max(1.0, abs(per_file[f or 0][0][n])))
+            for n, f in layout.names()
+        ]
+    )
+    speed = _typical_speed(datasets)
+    evaluator = JointEvaluator(
+        groups=make_groups(problems, rows),
+        layout=layout,
+        free=free,
+        steps=steps,
+        masses=np.array([d.mass for d in datasets]),
+        sigmas=sigmas,
+        law=law,
+        prior=layout.index[0, 0] in free and layout.index[0, 1] in free,
+        speed=speed,
+    )
+    e_values = [initial_restitution(d) for d in datasets]
+    e_known = [e for e in e_values if e is not None]
+    e0 = float(np.median(e_known)) if e_known else None
+    return Setup(
+        datasets=list(datasets),
+        law=law,
+        layout=layout,
+        evaluator=evaluator,
+        free=free,
+        lo=lo,
+        hi=hi,
+        sigma_known=sigma_known,
+        sigmas=sigmas,
+        times=[_observation_times(d) for d in datasets],
+        values=[v for v, _ in per_file],
+        e0=e0,
+        e_source=_e_source(datasets) if e0 is not None else "",
+        speed=speed,
+        initial=dict(initial),
+    )
+
+
+def _e_source(datasets) -> str:
+    kinds = {"impacts": "flight times", "apex": "rebound heights", "trace": "rebound heights"}
+    what = sorted({kinds[d.observe] for d in datasets})
+    median = " (median over files)" if len(datasets) > 1 else ""
+    return "closed form (" + ", ".join(what) + ")" + median
+
+
+def _padded_problems(datasets, per_file, rows, law, has_drag, sigmas, tol, shift_trace):
+    """One Problem per file, padded so that files of one structure stack."""
+    keys = [(d.scene, d.observe) for d in datasets]
+    longest = {k: max(r for r, kk in zip(rows, keys, strict=True) if kk == k) for k in set(keys)}
+    budget = {}
+    for d, (_, horizon), k in zip(datasets, per_file, keys, strict=True):
+        n_events = 0 if d.observe == "trace" else longest[k]
+        h = float(d.t[-1]) if d.observe == "trace" else horizon
+        budget[k] = max(budget.get(k, 0), default_max_steps(n_events, h))
+    out = []
+    for d, (_, horizon), sigma, k in zip(datasets, per_file, sigmas, keys, strict=True):
+        pad = longest[k] if len(datasets) > 1 else None
+        out.append(
+            make_problem(
+                d,
+                tol=tol,
+                has_drag=has_drag,
+                sigma=float(sigma),
+                horizon=horizon,
+                law=law,
+                shift_trace=shift_trace and d.observe == "trace",
+                rows=pad,
+                max_steps=budget[k] if len(datasets) > 1 else None,
+            )
+        )
+    return out
+
+
+def start_points(setup: Setup, e0: float, starts: int, rng) -> list[np.ndarray]:
+    """The closed-form start and `starts − 1` others spread over the t_c prior (e jittered 2%)."""
+    candidates = [start_point(setup, e0, CONTACT_TIME_GUESS)]
+    if starts > 1:
+        for t_c in np.geomspace(*CONTACT_TIME_PRIOR, max(starts - 1, 1) + 2)[1:-1]:
+            e = float(np.clip(e0 * (1.0 + 0.02 * rng.standard_normal()), 0.05, 0.995))
+            candidates.append(start_point(setup, e, float(t_c)))
+    return candidates
+
+
+def start_point(setup: Setup, e: float, t_c: float) -> np.ndarray:
+    """The joint z at restitution e and contact time t_c (s), other entries at their guesses."""
+    mass = float(setup.datasets[0].mass)
+    kappa, k_r = contact_parameters(setup.law, e, t_c, mass, setup.speed)
+    per_file = []
+    for values in setup.values:
+        v = {"kappa": kappa, "k_r": k_r, **values}
+        v.update({k: setup.initial[k] for k in ("kappa", "k_r") if k in setup.initial})
+        per_file.append(to_z(v))
+    return np.clip(setup.layout.join(per_file), setup.lo, setup.hi)
+
+
+def contact_parameters(law: str, e: float, t_c: float, mass: float, speed: float) -> tuple[float, float]:
+    """(κ, k_r) of `law` with restitution e and contact time t_c (s) at impact speed `speed`."""
+    if law == "hunt-crossley":
+        from ._restitution import hunt_crossley_from_restitution
+
+        kappa, k_r = hunt_crossley_from_restitution(e, t_c, mass, speed)
+        return float(kappa), float(k_r)
+    return parameters_from_restitution(e, t_c, mass)

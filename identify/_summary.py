@@ -1,0 +1,215 @@
+"""A finished fit in numbers: estimates with honest uncertainty, per-file tables, outliers.
+
+The covariance is Gauss–Newton over every fitted joint entry (`_uncertainty`); the
+headline `parameters` are the view of file 0 (the shared contact parameters and file
+0's own x0, v0 and offset), so a fit of one file reads exactly as before. Each file's
+own entries, rows, outliers, missed bounces and residual scatter go to `datasets`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import numpy as np
+
+from ._joint import contact_time_of
+from ._kelvin_voigt import restitution_and_contact_time
+from ._problem import PARAMETERS
+from ._result import FitResult
+from ._robust import missed_bounces, noise_statement
+from ._uncertainty import covariance, goodness_of_fit, summarize
+
+
+def view(setup, z: np.ndarray, cov: np.ndarray, f: int = 0):
+    """File f's 6-vector, the covariance of its free entries, and their indices in PARAMETERS."""
+    idx = setup.layout.index[f]
+    free6 = [i for i in range(len(PARAMETERS)) if idx[i] in setup.free]
+    pos = [setup.free.index(idx[i]) for i in free6]
+    return np.asarray(z)[idx], cov[np.ix_(pos, pos)], free6
+
+
+def law_derived(setup):
+    """(log κ, log k_r, mass) → (e, t_c, ∂e/∂u, ∂log t_c/∂u) for the fit's law.
+
+    Kelvin–Voigt: the closed forms (no gravity). Hunt–Crossley: e of one impact at the
+    data's typical impact speed (simulated, `law_restitution`; gradient by central
+    differences, step 1e-4 in the logs) and the undamped Hertz contact time there.
+    """
+    if setup.law == "kelvin-voigt":
+        return restitution_and_contact_time
+    from ._restitution import law_restitution
+
+    speed, g = setup.speed, float(setup.datasets[0].gravity)
+
+    def e_of(lk, lr, mass):
+        return float(
+            np.asarray(
+                law_restitution("hunt-crossley", math.exp(lk), math.exp(lr), mass, [speed], gravity=g)
+            )[0]
+        )
+
+    def derived(lk, lr, mass):
+        h = 1e-4
+        e = e_of(lk, lr, mass)
+        ge = np.array(
+            [
+                (e_of(lk + h, lr, mass) - e_of(lk - h, lr, mass)) / (2 * h),
+                (e_of(lk, lr + h, mass) - e_of(lk, lr - h, mass)) / (2 * h),
+            ]
+        )
+        t_c = contact_time_of("hunt-crossley", lk, lr, mass, speed)
+        return e, t_c, ge, np.array([-1.0 / 2.5, 0.0])
+
+    return derived
+
+
+def derived_quantities(setup, z: np.ndarray, cov: np.ndarray, f: int = 0) -> dict:
+    """The derived e and t_c entries of file f's view (see `summarize`)."""
+    z6, cov6, free6 = view(setup, z, cov, f)
+    mass = float(setup.datasets[f].mass)
+    return summarize(z6, cov6, free6, mass, derived=law_derived(setup))[1]
+
+
+def _file_entries(setup, z, cov, rows, r_data, sigma_used, best_alone):
+    """One dict per file: its rows, outliers, missed bounces, scatter and own entries."""
+    out = []
+    for f, d in enumerate(setup.datasets):
+        sl = rows.of_file(f)
+        used = rows.fitted[sl]
+        res = r_data[sl] * setup.sigmas[f]
+        own = {}
+        z6, cov6, free6 = view(setup, z, cov, f)
+        params = summarize(z6, cov6, free6, float(d.mass), derived=law_derived(setup))[0]
+        for name in ("x0", "v0", "offset"):
+            if setup.layout.index[f, PARAMETERS.index(name)] in setup.free:
+                own[name] = params[name]
+        times = setup.times[f]
+        outliers = [
+            {
+                "row": int(i),
+                "t": float(times[i]) if d.observe != "apex" or d.t is not None else None,
+                "residual": float(res[i]),
+                "reason": "beyond the outlier threshold (robust pass)",
+            }
+            for i in np.flatnonzero(rows.outlier[sl])
+        ]
+        missed = missed_bounces(times, ~rows.outlier[sl]) if d.observe == "impacts" else []
+        out.append(
+            {
+                "data": d.path,
+                "observe": d.observe,
+                "rows": int(d.num_rows),
+                "used": int(used.sum()),
+                "held_out": int(rows.holdout[sl].sum()),
+                "outliers": outliers,
+                "missed": missed,
+                "rms": float(np.sqrt(np.mean(res[used] ** 2))) if used.any() else None,
+                "sigma": float(sigma_used[f]),
+                "parameters": own,
+                "restitution_alone": None if best_alone is None else best_alone[f],
+            }
+        )
+    return out
+
+
+def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale) -> FitResult:
+    """The `FitResult` of a finished fit (honest noise, per-file tables, hold-out)."""
+    from ._fit import alone_restitution  # the per-file refit uses the fit's stages
+
+    n = sum(setup.n_rows)
+    r_data, jac = best.r[:n], best.jac[:n]
+    keep = rows.fitted
+    chi2 = float(np.sum(r_data[keep] ** 2))
+    p = len(setup.free)
+    goodness = goodness_of_fit(chi2, int(keep.sum()), p, sigma_known=setup.sigma_known)
+    understated = setup.sigma_known and goodness["consistent"] is False
+    cov, s2 = covariance(jac[keep], r_data[keep], sigma_known=setup.sigma_known and not understated)
+    z6, cov6, free6 = view(setup, best.z, cov)
+    d0 = setup.datasets[0]
+    parameters, derived, identifiable, corr, names = summarize(
+        z6, cov6, free6, float(d0.mass), rel_halfwidth=opts.rel_halfwidth, derived=law_derived(setup)
+    )
+    sigma_used = setup.sigmas * math.sqrt(s2)
+    scatter = float(np.sqrt(chi2 / max(int(keep.sum()) - p, 1))) * float(np.median(setup.sigmas))
+    noise = noise_statement(
+        d0.observe, setup.sigma_known, float(setup.sigmas[0]), scatter if setup.sigma_known else float(sigma_used[0]),
+        goodness, setup.times[0],
+    )  # fmt: skip
+    at_bound = [
+        "/".join(str(x) for x in setup.layout.names()[j] if x is not None)
+        for j in setup.free
+        if np.isclose(best.z[j], setup.lo[j], rtol=0, atol=1e-9)
+        or np.isclose(best.z[j], setup.hi[j], rtol=0, atol=1e-9)
+    ]
+    converged = bool(best.converged and math.isfinite(best.cost) and not at_bound)
+    if not converged:
+        identifiable = {name: False for name in identifiable}
+    alone = alone_restitution(setup, best, rows, opts) if setup.layout.n_files > 1 else None
+    holdout = None
+    if opts.holdout > 0:
+        holdout = _holdout(setup, rows, r_data, jac, cov, s2, sigma_used, opts.holdout)
+    return FitResult(
+        data=d0,
+        problem=_file_problem(setup, 0),
+        z=z6 if setup.layout.n_files == 1 else np.asarray(best.z)[setup.layout.index[0]],
+        free=names,
+        parameters=parameters,
+        derived=derived,
+        identifiable=identifiable,
+        correlation=corr,
+        cost=float(best.cost),
+        residuals=r_data
+        * np.concatenate([np.full(k, s) for k, s in zip(setup.n_rows, setup.sigmas, strict=True)]),
+        chi2=chi2,
+        sigma=float(sigma_used[0]),
+        sigma_source="file" if setup.sigma_known and not understated else "residuals",
+        goodness=goodness,
+        converged=converged,
+        message=best.why if not at_bound else f"stopped at a bound: {', '.join(at_bound)}",
+        iterations=int(best.iterations),
+        gradient_steps=int(best.gradient_steps),
+        method=opts.method,
+        starts=[dict(cost=run.cost, converged=run.converged, z=run.z) for run in runs],
+        initial=initial,
+        profile=None,
+        rel_halfwidth=opts.rel_halfwidth,
+        simulations=setup.evaluator.calls,
+        wall_s=0.0,
+        law=setup.law,
+        datasets=_file_entries(setup, best.z, cov, rows, r_data, sigma_used, alone),
+        used=rows.fitted.copy(),
+        noise=noise,
+        holdout=holdout,
+        robust=None
+        if opts.keep_outliers
+        else {"threshold": opts.threshold, "scale": robust_scale, "loss": "cauchy"},
+        n_parameters=p,
+        joint_z=np.asarray(best.z),
+        row_sigma=np.concatenate([np.full(k, s) for k, s in zip(setup.n_rows, setup.sigmas, strict=True)]),
+        sigma_known=setup.sigma_known,
+    )
+
+
+def _holdout(setup, rows, r_data, jac, cov, s2, sigma_used, fraction) -> dict:
+    """Prediction errors of the held-out rows against the noise plus the fit's uncertainty."""
+    from ._robust import holdout_summary
+
+    per_row = lambda values: np.concatenate(  # noqa: E731
+        [np.full(k, v) for k, v in zip(setup.n_rows, values, strict=True)]
+    )
+    finite = np.where(np.isfinite(cov), cov, 0.0)
+    variance = 1.0 + np.einsum("ij,jk,ik->i", jac, finite, jac) / s2
+    unit = "s" if setup.datasets[0].observe == "impacts" else "m"
+    return holdout_summary(
+        r_data * per_row(setup.sigmas), rows, per_row(sigma_used), fraction, unit, variance
+    )
+
+
+def _file_problem(setup, f: int):
+    """File f's own (unstacked) Problem."""
+    for g in setup.evaluator.groups:
+        if f in g.files:
+            k = g.files.index(f)
+            return jax.tree.map(lambda leaf, k=k: leaf[k], g.problem)
+    raise AssertionError(f)
