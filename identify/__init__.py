@@ -32,3 +32,14 @@ from ._qualify import (  # noqa: E402
     rebound_height as rebound_height,
 )
 from ._result import FitResult as FitResult  # noqa: E402
+
+# Restitution per bounce and per contact law (e against impact speed).
+# isort: split
+from ._plot_restitution import plot_restitution as plot_restitution  # noqa: E402
+from ._restitution import (  # noqa: E402
+    BounceRestitution as BounceRestitution,
+    bounce_restitution as bounce_restitution,
+    hunt_crossley_from_restitution as hunt_crossley_from_restitution,
+    law_contact_time as law_contact_time,
+    law_restitution as law_restitution,
+)
