@@ -438,27 +438,43 @@ def _run_starts(setup, candidates, rows, opts) -> list[_Point]:
     return runs
 
 
+#: The robust pass excludes at most this fraction of a fit's rows; beyond it the model,
+#: not a few rows, is what misfits, and nothing is excluded.
+MAX_OUTLIER_FRACTION = 0.2
+
+
 def _robust_pass(setup, best: _Point, rows, opts):
-    """Cauchy-weighted LM rounds, then the rows beyond the threshold are excluded."""
+    """Cauchy-weighted LM rounds, then the rows beyond the threshold are excluded.
+
+    Returns the point to go on from, the rows (with `outlier` set) and the robust scale.
+    The point is the robust one unless the plain least-squares point fits the kept
+    rows better; when more than `MAX_OUTLIER_FRACTION` of the rows would go, nothing
+    is excluded and the least-squares point is kept.
+    """
     n = sum(setup.n_rows)
     floor = 1.0 if setup.sigma_known else 0.0
+    scale = robust_scale(best.r[:n], rows.fitted, floor=floor)
+    if not np.any(flag_outliers(best.r[:n], rows, scale, opts.threshold)):
+        return best, rows, scale  # nothing beyond the threshold: least squares is already robust
     point = best
-    scale = robust_scale(point.r[:n], rows.fitted, floor=floor)
-    if not np.any(flag_outliers(point.r[:n], rows, scale, opts.threshold)):
-        return point, rows, scale  # nothing beyond the threshold: least squares is already robust
     for _ in range(3):
-        r = point.r[:n]
-        scale = robust_scale(r, rows.fitted, floor=floor)
-        w = _weights(setup, rows, robust=cauchy_weights(r, scale))
+        w = _weights(setup, rows, robust=cauchy_weights(point.r[:n], scale))
         point = _Point.from_lm(
             _lm(setup, point.z, w, opts, dchi2=1e-2),
             iterations=point.iterations,
             gradient_steps=point.gradient_steps,
         )
-    r = point.r[:n]
-    scale = robust_scale(r, rows.fitted, floor=floor)
-    rows = dataclasses.replace(rows, outlier=flag_outliers(r, rows, scale, opts.threshold))
-    return point, rows, scale
+        scale = robust_scale(point.r[:n], rows.fitted, floor=floor)
+    outlier = flag_outliers(point.r[:n], rows, scale, opts.threshold)
+    if outlier.sum() > MAX_OUTLIER_FRACTION * (~rows.holdout).sum():
+        return best, rows, scale
+    rows = dataclasses.replace(rows, outlier=outlier)
+    kept = rows.fitted
+
+    def kept_cost(p):
+        return float(np.sum(p.r[:n][kept] ** 2)) if math.isfinite(p.cost) else math.inf
+
+    return (point if kept_cost(point) <= kept_cost(best) else best), rows, scale
 
 
 def _final_pass(setup, best: _Point, rows, opts) -> _Point:
@@ -479,8 +495,12 @@ def _final_pass(setup, best: _Point, rows, opts) -> _Point:
         t_c = derived["contact_time"]
         use_prior = not t_c["stderr"] < 0.1 * t_c["value"]  # sd(log t_c) < 0.1
         ev.prior = use_prior
+    # The tight pass may have to follow the long κ–k_r–t_c valley of a joint fit: it
+    # gets four times the iterations of the loose stages.
     point = _Point.from_lm(
-        _lm(setup, z, _weights(setup, rows), opts),
+        _lm(
+            setup, z, _weights(setup, rows), dataclasses.replace(opts, max_iterations=4 * opts.max_iterations)
+        ),
         iterations=best.iterations,
         gradient_steps=best.gradient_steps,
     )
@@ -517,10 +537,10 @@ def alone_restitution(setup, best: _Point, rows, opts) -> list[dict]:
     )
     z = layout.join(list(setup.layout.split(best.z)))
     point = _Point.from_lm(_lm(alone, z, _weights(alone, rows), opts, dchi2=1e-2))
-    ev.prior = False
-    r, jac, _ = ev(point.z)
-    keep = rows.fitted
-    cov, _ = covariance(jac[keep], r[keep], sigma_known=False)
+    # The covariance keeps the prior's rows: one drop alone hardly separates t_c from
+    # the release height and the clock, and e must not inherit that null direction.
+    keep = np.concatenate([rows.fitted, np.ones(len(ev._prior_pairs()), bool)])
+    cov, _ = covariance(point.jac[keep], point.r[keep], sigma_known=setup.sigma_known)
     setup.evaluator.calls += ev.calls
     return [derived_quantities(alone, point.z, cov, f=f)["restitution"] for f in range(layout.n_files)]
 
@@ -622,7 +642,7 @@ def _run_gradient_stage(step, opts, setup, rows, z):
     w_rows = _weights(setup, rows, _windows(setup)[0])
     for g in setup.evaluator.groups:
         problems.append(
-            eqx.tree_at(lambda p: p.autodiff, g.problem, mode) if mode != "reverse" else g.problem
+            dataclasses.replace(g.problem, autodiff=mode)
         )
         indices.append(jnp.asarray(setup.layout.index[g.files]))
         n_pad = int(np.asarray(g.problem.t_obs).shape[-1])

@@ -47,6 +47,23 @@ def restitution_from_impacts(times) -> float:
     return _clip_e(float(np.median(flights[1:] / flights[:-1])))
 
 
+def restitution_from_impacts_with_drag(times, drag: float, gravity: float) -> float:
+    """The median per-bounce e of drag-corrected flights (`identify.bounce_restitution`).
+
+    With quadratic drag the drag-free ratio T_{k+1}/T_k reads low (0.924 for a
+    ping-pong ball whose e is 0.955); the flights' launch and landing speeds do not.
+    Falls back to the drag-free ratio when the onsets are not strictly increasing.
+    """
+    from ._restitution import bounce_restitution
+
+    try:
+        e = bounce_restitution(np.asarray(times, dtype=float), drag=drag, gravity=gravity).restitution
+    except ValueError:
+        return restitution_from_impacts(times)
+    e = np.asarray(e)[np.isfinite(e)]
+    return _clip_e(float(np.median(e))) if e.size else restitution_from_impacts(times)
+
+
 def apex_heights_of_trace(t, x, noise: float | None = None) -> np.ndarray:
     """Rebound apex heights of a drop-test trace: the maxima of x between contacts.
 
@@ -77,6 +94,8 @@ def initial_restitution(data) -> float | None:
         drop = data.x0 if data.scene == "drop" and data.v0 == 0 else None
         return restitution_from_heights(data.h, drop)
     if data.observe == "impacts":
+        if data.drag > 0 and len(data.t) >= 3:
+            return restitution_from_impacts_with_drag(data.t, data.drag, data.gravity)
         return restitution_from_impacts(data.t)
     if data.scene == "drop":
         heights = apex_heights_of_trace(data.t, data.x, data.noise)

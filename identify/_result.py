@@ -40,6 +40,14 @@ class FitResult:
     - `residuals`: prediction − data, in the data's units.
     - `starts`: the cost and convergence of every start; `initial`: the closed-form
       start; `profile`: the profile likelihood of κ (when asked for).
+    - `law`, `laws`, `law_choice`: the contact law, and with `law="auto"` each law's
+      χ², AIC, BIC and estimates on the rows both used (`criteria`).
+    - `datasets`: one dict per file (rows, used, held out, `outliers`, `missed` bounces,
+      residual `rms`, its own x0/v0/offset, its `restitution_alone`); `datasets_data`
+      the files themselves; `used`: the fitted rows (outliers and held-out rows not).
+    - `noise`: the stated σ against the residual scatter, in words (`noise["text"]`).
+    - `holdout`: `{"fraction", "rows", "rms", "max", "within_noise", …}` in data units.
+    - `robust`: the robust pass's loss, threshold and scale (None with keep_outliers).
     - `simulations`: compiled evaluations (each 2q + 1 event-mode runs, q the free
       parameters other than the offset, whose Jacobian column needs no run); `wall_s`.
     """
@@ -81,6 +89,7 @@ class FitResult:
     law_choice: str = "given"
     row_sigma: np.ndarray | None = None
     sigma_known: bool = False
+    datasets_data: list = dataclasses.field(default_factory=list)
 
     def criteria(self, used: np.ndarray | None = None) -> dict:
         """χ², AIC and BIC of the fit over the `used` rows (default: its fitted rows).

@@ -29,6 +29,8 @@ DEFAULT_BOUNDS = {
     "v0": (-1e3, 1e3),
     "offset": (-1e4, 1e4),
 }
+#: Hunt–Crossley's κ (N/m^1.5) and k_r = χκ (N·s/m^2.5) run far larger than Kelvin–Voigt's.
+LAW_BOUNDS = {"hunt-crossley": {"kappa": (1.0, 1e15), "k_r": (1e-12, 1e14)}}
 
 
 @dataclasses.dataclass
@@ -139,7 +141,7 @@ def build(datasets, *, law, nuisance, freeze, initial, bounds, tol) -> Setup:
         for j, (name, _) in enumerate(layout.names())
         if (name in ("kappa", "k_r") or name in nuisance) and name not in freeze
     ]
-    bounds = {**DEFAULT_BOUNDS, **bounds}
+    bounds = {**DEFAULT_BOUNDS, **LAW_BOUNDS.get(law, {}), **bounds}
     lo6, hi6 = to_z({n: bounds[n][0] for n in PARAMETERS}), to_z({n: bounds[n][1] for n in PARAMETERS})
     names = [n for n, _ in layout.names()]
     lo = np.array([lo6[PARAMETERS.index(n)] for n in names])

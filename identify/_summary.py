@@ -9,6 +9,7 @@ own entries, rows, outliers, missed bounces and residual scatter go to `datasets
 from __future__ import annotations
 
 import math
+import os
 
 import jax
 import numpy as np
@@ -186,6 +187,7 @@ def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale) -> Fi
         else {"threshold": opts.threshold, "scale": robust_scale, "loss": "cauchy"},
         n_parameters=p,
         joint_z=np.asarray(best.z),
+        datasets_data=list(setup.datasets),
         row_sigma=np.concatenate([np.full(k, s) for k, s in zip(setup.n_rows, setup.sigmas, strict=True)]),
         sigma_known=setup.sigma_known,
     )
@@ -204,6 +206,50 @@ def _holdout(setup, rows, r_data, jac, cov, s2, sigma_used, fraction) -> dict:
     return holdout_summary(
         r_data * per_row(setup.sigmas), rows, per_row(sigma_used), fraction, unit, variance
     )
+
+
+def bounce_points(result) -> list[tuple[str, object]]:
+    """Each impact file's per-bounce restitution from its kept onsets (drag-corrected).
+
+    Uses the fitted drag and contact time; a missed bounce splits the sequence (an
+    interval spanning two flights says nothing about either), and the first segment
+    of a drop from rest also gets its first bounce from the fitted release height.
+    **Returns:** `(label, BounceRestitution)` pairs, one per segment of ≥ 3 onsets.
+    """
+    from ._restitution import bounce_restitution
+
+    drag = result.parameters["drag"]["value"] if result.data.drag > 0 or "drag" in result.free else 0.0
+    t_c = result.derived["contact_time"]["value"]
+    t_c = t_c if math.isfinite(t_c) else 0.0
+    out = []
+    for f, entry in enumerate(result.datasets):
+        d = result.datasets_data[f]
+        if d.observe != "impacts":
+            continue
+        keep = np.ones(d.num_rows, bool)
+        keep[[o["row"] for o in entry["outliers"]]] = False
+        cuts = [m["before_row"] for m in entry["missed"]]
+        kept = np.flatnonzero(keep)
+        segments = np.split(kept, [int(np.searchsorted(kept, c)) for c in cuts])
+        label = os.path.basename(d.path) if d.path else f"data {f + 1}"
+        x0 = entry["parameters"].get("x0", {}).get("value", d.x0)
+        offset = entry["parameters"].get("offset", {}).get("value")
+        for k, seg in enumerate(segments):
+            if seg.size < 3:
+                continue
+            from_rest = k == 0 and d.v0 == 0 and offset is not None and seg[0] == 0
+            try:
+                points = bounce_restitution(
+                    np.asarray(d.t)[seg],
+                    drag=drag,
+                    gravity=d.gravity,
+                    contact_time=min(t_c, 0.5 * float(np.min(np.diff(np.asarray(d.t)[seg])))),
+                    drop_height=x0 if from_rest and x0 > 0 else None,
+                )
+            except ValueError:
+                continue
+            out.append((label if len(segments) == 1 else f"{label} ({k + 1})", points))
+    return out
 
 
 def _file_problem(setup, f: int):

@@ -9,7 +9,7 @@ import math
 import matplotlib
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
+from bounce_reference import scipy_bounces, scipy_hunt_crossley
 
 import identify
 import jaxunilat
@@ -22,40 +22,11 @@ ES = [0.91, 0.86, 0.89, 0.8, 0.84, 0.77, 0.82]  # restitution per bounce, varyin
 
 
 def _scipy_bounces(h0, es, t_c, k, g=G):
-    """Drop from rest at h0 (t = 0) onto x = 0; bounce i returns at es[i] × its impact
-    speed after resting t_c. Rise v' = −g(1 + k²v²) and fall v' = −g(1 − k²v²) are
-    integrated separately (each smooth), ended by located events.
+    """Drop from rest at h0; bounce i returns at es[i] × its impact speed after resting t_c.
 
     **Returns:** (onset times [s], impact speeds [m/s]), one per bounce (len(es) + 1).
     """
-
-    def rise(t, y):
-        return [y[1], -g * (1.0 + k * k * y[1] ** 2)]
-
-    def fall(t, y):
-        return [y[1], -g * (1.0 - k * k * y[1] ** 2)]
-
-    def apex(t, y):
-        return y[1]
-
-    def floor(t, y):
-        return y[0]
-
-    apex.terminal, apex.direction = True, -1
-    floor.terminal, floor.direction = True, -1
-    opts = dict(method="DOP853", rtol=1e-12, atol=1e-14)
-    t0, y0 = 0.0, [h0, 0.0]
-    onsets, impacts = [], []
-    for e in [*es, None]:
-        down = solve_ivp(fall, (t0, t0 + 10.0), y0, events=floor, **opts)
-        t_land, w = down.t_events[0][0], -down.y_events[0][0][1]
-        onsets.append(t_land)
-        impacts.append(w)
-        if e is None:
-            break
-        up = solve_ivp(rise, (t_land + t_c, t_land + t_c + 10.0), [0.0, e * w], events=apex, **opts)
-        t0, y0 = up.t_events[0][0], [up.y_events[0][0][0], 0.0]
-    return np.asarray(onsets), np.asarray(impacts)
+    return scipy_bounces(h0, lambda i, w: (es[i], t_c), k, len(es) + 1, g)
 
 
 @pytest.mark.parametrize("k", [0.0, 0.05, 0.122, 0.4])
@@ -148,22 +119,7 @@ def test_law_restitution_kelvin_voigt_without_gravity_is_the_closed_form():
 
 
 def _scipy_hunt_crossley(kappa, chi, v, g):
-    """m δ̈ = m g − κ δ^1.5 (1 + χ δ̇), δ(0) = 0, δ̇(0) = v, to the exit δ = 0: (e, t_c)."""
-
-    def rhs(t, y):
-        d = max(y[0], 0.0)
-        return [y[1], g - kappa / MASS * d**1.5 * (1.0 + chi * y[1])]
-
-    def leave(t, y):
-        return y[0]
-
-    leave.terminal, leave.direction = True, -1
-    dmax = (1.25 * MASS * v * v / kappa) ** 0.4
-    t_end = 50 * jaxunilat.hunt_crossley_contact_time(kappa, MASS, v)
-    sol = solve_ivp(
-        rhs, (0.0, t_end), [0.0, v], method="DOP853", rtol=1e-12, atol=[1e-14 * dmax, 1e-14 * v], events=leave
-    )
-    return -sol.y_events[0][0][1] / v, sol.t_events[0][0]
+    return scipy_hunt_crossley(kappa, chi, MASS, v, g)
 
 
 @pytest.mark.parametrize("g", [0.0, G])
