@@ -641,9 +641,7 @@ def _run_gradient_stage(step, opts, setup, rows, z):
     problems, indices, weights = [], [], []
     w_rows = _weights(setup, rows, _windows(setup)[0])
     for g in setup.evaluator.groups:
-        problems.append(
-            dataclasses.replace(g.problem, autodiff=mode)
-        )
+        problems.append(dataclasses.replace(g.problem, autodiff=mode))
         indices.append(jnp.asarray(setup.layout.index[g.files]))
         n_pad = int(np.asarray(g.problem.t_obs).shape[-1])
         w = np.zeros((len(g.files), n_pad))

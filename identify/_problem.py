@@ -181,7 +181,8 @@ def evaluate_rows(problem: Problem, zs) -> tuple[Array, Array]:
 def stack_problems(problems: list[Problem]) -> Problem:
     """One `Problem` whose array leaves stack those of `problems` (all of one structure:
     the same static fields and observation counts) along a leading file axis."""
-    return jax.tree.map(lambda *leaves: jnp.stack(leaves), *problems)
+    # NumPy stacking then one transfer: an eager jnp.stack would compile on first use.
+    return jax.tree.map(lambda *leaves: _device(np.stack([np.asarray(x) for x in leaves])), *problems)
 
 
 def _device(value) -> Array:

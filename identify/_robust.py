@@ -17,8 +17,11 @@ matched to the nearest predicted onset, so such a gap costs nothing; it is repor
 they scatter more (p < 1e-3) the stated σ is replaced by the residual scatter for the
 intervals, and the report says so in words: for impacts, bounce-to-bounce variation
 of the restitution (spin, the contact point, the seam: 0.2–0.5% for a real ball) adds
-a scatter of the *intervals* of about δe/e times the interval. A σ overstated by a
-large factor (p > 1 − 1e-3, reduced χ² ≪ 1) is flagged too.
+a scatter of the *intervals* of about δe/e times the interval. A scatter beyond what a
+ball can do (a variation of e over 2%; for traces and apex heights, over 5× the stated
+σ) is a wrong model (a clock offset not fitted, a wrong scene), and then no quantity
+is declared identifiable. A σ overstated by a large factor (p > 1 − 1e-3, reduced
+χ² ≪ 1) is flagged too.
 """
 
 from __future__ import annotations
@@ -36,6 +39,12 @@ CAUCHY_C = 2.385
 THRESHOLD = 4.0
 #: An interval this much longer than the previous one means a missed bounce.
 MISSED_RATIO = 1.25
+#: Beyond this bounce-to-bounce variation of e (real balls: 0.2–0.5%), excess onset
+#: scatter is a misfit of the model, not scatter of the ball.
+MAX_E_VARIATION = 0.02
+#: Likewise for traces and apex heights: residual scatter beyond this multiple of the
+#: stated σ is a misfit.
+MAX_SCATTER_RATIO = 5.0
 
 
 def robust_scale(r: np.ndarray, used: np.ndarray, *, floor: float) -> float:
@@ -112,7 +121,9 @@ def noise_statement(d_observe: str, sigma_known: bool, stated, scatter: float, g
 
     **Returns:** `{"stated", "scatter", "unit", "verdict", "text"}`; verdict is one of
     `"estimated"` (no σ stated), `"consistent"`, `"understated"` (the residuals scatter
-    more: the intervals use the scatter) or `"overstated"` (reduced χ² ≪ 1).
+    more, plausibly from bounce-to-bounce scatter: the intervals use the scatter),
+    `"misfit"` (far more than scatter explains: no quantity is identifiable) or
+    `"overstated"` (reduced χ² ≪ 1).
     """
     unit = "s" if d_observe == "impacts" else "m"
     show = (lambda v: f"{v * 1e3:.3g} ms") if unit == "s" else (lambda v: f"{v * 1e3:.3g} mm")
@@ -128,7 +139,14 @@ def noise_statement(d_observe: str, sigma_known: bool, stated, scatter: float, g
         if d_observe == "impacts" and len(times) > 2:
             variation = scatter * math.sqrt(2.0) / float(np.mean(np.diff(times)))
             text += f": the bounce-to-bounce variation of e is about {variation:.2%}"
-        text += "; the intervals use the residual scatter"
+            plausible = variation <= MAX_E_VARIATION
+        else:
+            plausible = scatter <= MAX_SCATTER_RATIO * stated
+        if plausible:
+            text += "; the intervals use the residual scatter"
+        else:
+            verdict = "misfit"
+            text += "; far more than bounce-to-bounce scatter explains: the model does not fit"
     else:
         verdict = "consistent"
         text = f"residual scatter {show(scatter)}, consistent with the stated {show(stated)}"

@@ -144,7 +144,7 @@ def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale) -> Fi
         or np.isclose(best.z[j], setup.hi[j], rtol=0, atol=1e-9)
     ]
     converged = bool(best.converged and math.isfinite(best.cost) and not at_bound)
-    if not converged:
+    if not converged or noise["verdict"] == "misfit":
         identifiable = {name: False for name in identifiable}
     alone = alone_restitution(setup, best, rows, opts) if setup.layout.n_files > 1 else None
     holdout = None
@@ -257,5 +257,6 @@ def _file_problem(setup, f: int):
     for g in setup.evaluator.groups:
         if f in g.files:
             k = g.files.index(f)
-            return jax.tree.map(lambda leaf, k=k: leaf[k], g.problem)
+            # NumPy indexing then one transfer: eager jax indexing would compile.
+            return jax.tree.map(lambda leaf, k=k: jax.device_put(np.asarray(leaf)[k]), g.problem)
     raise AssertionError(f)

@@ -91,6 +91,7 @@ def test_impacts_without_their_offset_fail_the_chi2_test_and_identify_nothing(re
     assert g["reduced_chi2"] > 100 and g["consistent"] is False and g["p_value"] < 1e-3
     assert not any(result.identifiable.values())
     assert "WARNING: the model does not fit the data" in report and "--fit offset" in report
+    assert result.noise["verdict"] == "misfit" and "the model does not fit" in result.noise["text"]
     doc = result.to_json_dict()
     assert doc["goodness_of_fit"]["consistent"] is False
     assert not any(doc["identifiable"].values())
@@ -141,15 +142,18 @@ def test_offset_column_is_closed_form_and_takes_no_runs(reference):
     Checked against a central difference of residuals from explicit runs at offset ± h,
     and the κ, k_r columns still come from 2 runs each (5 runs per call, not 7).
     """
-    from identify._fit import _Evaluator
-    from identify._problem import PARAMETERS, evaluate_rows, make_problem, to_z
+    from identify._problem import PARAMETERS, evaluate_rows, to_z
+    from identify._setup import build
 
     data = _impacts(reference, seed=7, n=8)
-    problem = make_problem(data, has_drag=True, sigma=data.noise, horizon=float(data.t[-1]) - OFFSET + 0.3)
+    setup = build(
+        [data], law="kelvin-voigt", nuisance=("offset",), freeze=(), initial={}, bounds={}, tol=1e-10
+    )
+    evaluator = setup.evaluator
+    evaluator.prior = False
+    problem = setup.evaluator.groups[0].problem
     z = to_z(dict(kappa=TRUE["kappa"], k_r=TRUE["k_r"], drag=DRAG, x0=X0, v0=0.0, offset=OFFSET))
-    free = [PARAMETERS.index(n) for n in ("kappa", "k_r", "offset")]
-    steps = np.array([1e-4, 1e-4, 1e-4, 1e-6, 1e-5, 1e-6])
-    evaluator = _Evaluator(problem, free, steps, MASS, prior=False)
+    assert evaluator.free == [PARAMETERS.index(n) for n in ("kappa", "k_r", "offset")]
     assert evaluator.rows == 5
     r, jac, ok = evaluator(z)
     assert ok and jac.shape == (8, 3) and np.all(np.isfinite(jac))
@@ -158,8 +162,8 @@ def test_offset_column_is_closed_form_and_takes_no_runs(reference):
     zs = np.repeat(z[None, :], 5, axis=0)
     zs[0, i] += h
     zs[1, i] -= h
-    res, ok_rows = evaluate_rows(problem, zs)
-    res = np.asarray(res)
+    res, ok_rows = evaluate_rows(problem, zs[None])
+    res, ok_rows = np.asarray(res)[0], np.asarray(ok_rows)[0]
     assert np.all(np.asarray(ok_rows))
     np.testing.assert_allclose(jac[:, 2], (res[0] - res[1]) / (2 * h), rtol=1e-8)
     np.testing.assert_allclose(r, res[2], rtol=0, atol=0)
