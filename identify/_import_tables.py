@@ -118,7 +118,7 @@ def _decode(raw: bytes, name: str) -> str:
 
 
 def read_table(path) -> Table:
-    """Read a delimited text table or an `.xlsx` workbook (its first sheet with numbers)."""
+    """Read a delimited text table or an `.xlsx` workbook (the sheet with the most numbers)."""
     raw, name = _read_bytes(path)
     if raw.startswith(b"PK\x03\x04"):
         return _read_xlsx(name)
@@ -183,10 +183,7 @@ def _is_data(cells, decimal) -> bool:
 def _build(name, unit, split, *, sep=None, decimal=".", kind="CSV") -> Table:
     first = next((i for i, (_, cells) in enumerate(split) if _is_data(cells, decimal)), None)
     if first is None:
-        hint = ""
-        if sep == "," and any(re.search(r"\d,\d", ",".join(str(c) for c in cells)) for _, cells in split):
-            hint = " (decimal commas in a comma-separated file? export with ';' or tab separators)"
-        raise ValueError(f"{name}: {unit} {split[-1][0]}: no numeric data rows in the file{hint}")
+        raise ValueError(_no_data_problem(name, unit, split, sep))
     if first == 0:
         raise ValueError(
             f"{name}: {unit} {split[0][0]}: no header row before the numbers; the first row must name the "
@@ -199,6 +196,14 @@ def _build(name, unit, split, *, sep=None, decimal=".", kind="CSV") -> Table:
     preamble = [(n, " ".join(str(c) for c in cells if c is not None)) for n, cells in split[: first - 1]]
     rows, trailing = [], []
     data = split[first:]
+    if sep == "," and any(_split_decimals(c, len(columns)) for _, c in data):
+        # Decimal commas in a comma-separated file: the numbers split in two. Name the first
+        # row that reads as whole numbers only (it may even have the right field count).
+        n, cells = next((n, c) for n, c in data if _split_decimals(c, 0))
+        raise ValueError(
+            f"{name}: {unit} {n}: {sep.join(str(c) for c in cells)!r}: decimal commas in a comma-separated "
+            "file (the numbers split in two); export with a semicolon or tab separator, or with decimal points"
+        )
     for k, (n, cells) in enumerate(data):
         cells = list(cells)
         while len(cells) > len(columns) and (cells[-1] is None or str(cells[-1]).strip() == ""):
@@ -213,7 +218,11 @@ def _build(name, unit, split, *, sep=None, decimal=".", kind="CSV") -> Table:
         rest = data[k + 1 :]
         if all(not _is_data(c, decimal) or len(c) != len(columns) for _, c in rest):
             # Junk after the data: report it, read nothing more.
-            trailing = [(m, " ".join(str(c) for c in cs if c is not None)) for m, cs in data[k:]]
+            trailing = [
+                (m, " ".join(str(c) for c in cs if c is not None))
+                for m, cs in data[k:]
+                if any(c is not None and str(c).strip() for c in cs)
+            ]
             break
         raise ValueError(_row_problem(name, unit, n, cells, values, columns, header_line, sep, decimal))
     if not rows:
@@ -223,15 +232,41 @@ def _build(name, unit, split, *, sep=None, decimal=".", kind="CSV") -> Table:
     )
 
 
+def _no_data_problem(name, unit, split, sep) -> str:
+    """Why no row of the file reads as numbers: the first row that shows a cause, or the end."""
+    for n, cells in split[1:]:
+        texts = [str(c).strip() for c in cells if c is not None and str(c).strip()]
+        if sep == "," and _split_decimals(cells, 0):
+            return (
+                f"{name}: {unit} {n}: no numeric data rows: decimal commas in a comma-separated file? "
+                "export with a semicolon or tab separator, or with decimal points"
+            )
+        for text in texts:
+            if re.fullmatch(r"[+-]?[\d.,]+\s*[A-Za-zµ]+", text):
+                return (
+                    f"{name}: {unit} {n}: {text!r} is not a number: units belong in the header, e.g. 'y (cm)', "
+                    "not in the cells"
+                )
+            if re.fullmatch(r"[+-]?[\d.,]+([|: ]+[+-]?[\d.,]+)+", text):
+                return (
+                    f"{name}: {unit} {n}: {text!r} is not a number: a separator other than comma, semicolon "
+                    "or tab? (one column only was found)"
+                )
+    return f"{name}: {unit} {split[-1][0]}: no numeric data rows in the file"
+
+
+def _split_decimals(cells, columns: int) -> bool:
+    """Whether a comma-separated row looks like numbers with decimal commas split in two:
+    whole numbers only, at least two and more than `columns` of them."""
+    filled = [str(c).strip() for c in cells if c is not None and str(c).strip()]
+    return len(filled) >= max(2, columns + 1) and all(re.fullmatch(r"[+-]?\d+", c) for c in filled)
+
+
 def _row_problem(name, unit, n, cells, values, columns, header_line, sep, decimal) -> str:
     where = f"{name}: {unit} {n}"
     if len(values) != len(columns):
         cause = ""
-        if (
-            sep == ","
-            and len(values) > len(columns)
-            and all(re.fullmatch(r"[+-]?\d*", str(c)) for c in cells)
-        ):
+        if sep == "," and len(values) > len(columns) and _split_decimals(cells, len(columns)):
             cause = (
                 " (decimal commas in a comma-separated file: the numbers split in two; export with a "
                 "semicolon or tab separator, or with decimal points)"
@@ -269,7 +304,7 @@ def _read_xlsx(name: str) -> Table:
         book = openpyxl.load_workbook(name, read_only=True, data_only=True)
     except Exception as err:  # a damaged or non-workbook zip
         raise ValueError(f"{name}: not a readable .xlsx workbook ({type(err).__name__}: {err})") from None
-    problems = []
+    problems, tables = [], []
     try:
         for sheet in book.worksheets:
             split = [
@@ -283,11 +318,15 @@ def _read_xlsx(name: str) -> Table:
                 [(n, [str(c) for c in cells if isinstance(c, str)]) for n, cells in split], ";"
             )
             try:
-                return _build(f"{name} (sheet {sheet.title!r})", "row", split, decimal=decimal, kind="xlsx")
+                tables.append(
+                    _build(f"{name} (sheet {sheet.title!r})", "row", split, decimal=decimal, kind="xlsx")
+                )
             except ValueError as err:
                 problems.append(str(err))
     finally:
         book.close()
+    if tables:  # the sheet with the most numbers (phyphox writes one sheet per export set)
+        return max(tables, key=lambda t: sum(v is not None for _, row in t.rows for v in row))
     raise ValueError(problems[0] if problems else f"{name}: row 1: the workbook has no data")
 
 
@@ -357,7 +396,7 @@ def import_phyphox(
     wide = [i for i, c in enumerate(cols) if re.fullmatch(r"start|stop(\s*\d+)?|bounce\s*\d+", c.name, re.I)]
     times: list[float] = []
     lines: list[int] = []
-    if time_i is None and interval_i is None and wide:
+    if time_i is None and len(wide) >= 2:
         scale = _seconds(table, cols[wide[0]], notes)
         (line, values), *others = table.rows
         if others:
