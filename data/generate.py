@@ -302,6 +302,8 @@ def bounces(x0: float, until: float, rng: np.random.Generator) -> dict[str, np.n
             raise RuntimeError(f"bounce {len(onset) + 1}: no impact and rebound apex within {span:.3f} s")
         if hit > until:
             break
+        if len(onset) >= 400:
+            raise RuntimeError(f"more than 400 bounces before t = {until} s: the ball comes to rest first")
         onset.append(hit)
         speed.append(-float(jaxunilat.contact_table(sol, ball)["v_in"][0]))
         e_i.append(e)

@@ -102,7 +102,9 @@ def read_wav(path) -> WavAudio:
     except OSError as err:
         raise ValueError(f"{name}: cannot be read ({err.strerror or err})") from None
     if len(raw) < 12 or raw[8:12] != b"WAVE" or raw[:4] not in (b"RIFF", b"RF64", b"RIFX"):
-        hint = " (an MP3, M4A or other compressed file? convert it to WAV)" if raw[:3] == b"ID3" else ""
+        kinds = {b"ID3": "an MP3", b"fLa": "a FLAC", b"Ogg": "an Ogg"}
+        kind = "an M4A/MP4" if raw[4:8] == b"ftyp" else kinds.get(raw[:3])
+        hint = f" ({kind} file? convert it to WAV)" if kind else ""
         raise ValueError(f"{name}: not a WAV file (no RIFF/WAVE header){hint}")
     if raw[:4] == b"RIFX":
         raise ValueError(f"{name}: big-endian WAV (RIFX) is not supported; {_VALID}, little-endian RIFF")
@@ -177,39 +179,6 @@ def read_wav(path) -> WavAudio:
     if channels == 2:
         x = x.reshape(-1, 2).mean(axis=1)
     return WavAudio(samples=x, rate=float(rate), channels=channels, bits=bits, encoding=encoding, path=name)
-
-
-def write_wav(path, samples, rate: int, *, bits: int = 16, encoding: str = "pcm", channels: int = 1) -> None:
-    """Write a WAV file (PCM 16/24/32-bit or float 32/64-bit); `samples` full scale 1,
-    shape (n,) or (n, channels). PCM values are rounded and clipped to full scale."""
-    x = np.asarray(samples, dtype=np.float64)
-    if x.ndim == 1:
-        x = np.repeat(x[:, None], channels, axis=1)
-    channels = x.shape[1]
-    if encoding == "float":
-        if bits not in (32, 64):
-            raise ValueError(f"bits = {bits} is not supported for float; valid: 32, 64")
-        payload = x.astype("<f4" if bits == 32 else "<f8").tobytes()
-        tag = _FLOAT
-    else:
-        if bits not in (16, 24, 32):
-            raise ValueError(f"bits = {bits} is not supported for PCM; valid: 16, 24, 32")
-        full = float(1 << (bits - 1))
-        q = np.clip(np.round(x * full), -full, full - 1).astype(np.int64)
-        if bits == 24:
-            q = q & 0xFFFFFF
-            payload = (
-                np.stack([q & 0xFF, (q >> 8) & 0xFF, (q >> 16) & 0xFF], axis=-1).astype(np.uint8).tobytes()
-            )
-        else:
-            payload = q.astype("<i2" if bits == 16 else "<i4").tobytes()
-        tag = _PCM
-    align = channels * bits // 8
-    fmt = struct.pack("<HHIIHH", tag, channels, int(rate), int(rate) * align, align, bits)
-    body = b"WAVE" + b"fmt " + struct.pack("<I", len(fmt)) + fmt + b"data" + struct.pack("<I", len(payload))
-    body += payload + (b"\0" if len(payload) & 1 else b"")
-    with open(os.fspath(path), "wb") as f:
-        f.write(b"RIFF" + struct.pack("<I", len(body)) + body)
 
 
 # -- detection ------------------------------------------------------------------------
