@@ -1,19 +1,29 @@
 """Generate the bundled SYNTHETIC data sets of data/ (see data/README.md).
 
-    python data/generate.py            # (re)write the four files
+    python data/generate.py            # (re)write every file
     python data/generate.py --check    # regenerate in memory and compare; write nothing
 
 Every file is simulated with jaxunilat's event mode (`solver="event"`, rtol = atol =
 1e-12: every contact entry and exit located) from the true parameters below, then
 Gaussian noise from NumPy's `default_rng` with a fixed seed is added and the values are
 rounded to the stated print precision. No measured or third-party data is involved.
+
+Besides the four data sets (jaxunilat-data files), it writes raw recordings for
+`jaxunilat import`: a phone's WAV recording of a drop (`phone_drop.wav`) and phyphox
+exports of drops from several heights (`phyphox_drop_*.csv`), with the faults of real
+recordings (clipping, room noise, a spurious click, a missed quiet bounce, echoes and
+duplicate rows) and a restitution that scatters from bounce to bounce.
 """
 
 from __future__ import annotations
 
 import argparse
+import io
+import math
 import os
+import re
 import sys
+import wave
 
 import numpy as np
 
@@ -173,6 +183,387 @@ def generate() -> dict[str, Dataset]:
     return out
 
 
+# -- raw recordings for `jaxunilat import` ------------------------------------------------
+
+#: The ball of the raw recordings: a 40 mm, 2.7 g ball on a hard floor, with quadratic
+#: drag 0.12 s/m. Its mean restitution e = 0.955 and contact time t_c = 0.7 ms give κ and
+#: k_r (Kelvin–Voigt); every bounce i draws its own e_i = e (1 + 0.003 N(0, 1)) (spin,
+#: contact point and seam make a real ball's restitution scatter by 0.2–0.5%).
+BOUNCING = dict(mass=2.7e-3, drag=0.12, restitution=0.955, contact_time=0.7e-3, scatter=0.003)
+#: Child seeds (SeedSequence(SEED).spawn(...)) of the raw recordings: the phone drop's e
+#: scatter, its room noise, then one per phyphox export; 0–3 are the data sets above.
+RAW_SEEDS = dict(phone_bounces=4, phone_noise=5, phyphox=(6, 7, 8, 9))
+
+#: `phone_drop.wav`: 48 kHz, 16-bit PCM, mono, 7.0 s. The ball is released from rest with
+#: its lowest point 250 mm above the floor at t = 0.55 s on the recording's clock.
+#: Click i (a damped two-mode resonance, 3.3 and 5.2 kHz, rising in 40 µs, decaying in
+#: 0.9 ms, with two room reflections at 2.9 and 6.3 ms) starts at the impact onset with
+#: amplitude 2.4 (v_i / v_1)² full scale: the first ones clip. Room noise: pink noise
+#: (0.0015 rms) plus white noise (0.0005 rms) plus 50 Hz hum (0.006) and its third
+#: harmonic (0.002). Bounce 24 is rendered at 0.3% of its amplitude (a quiet bounce no
+#: detector can hear: missed), and a handling click (1.7 kHz, 0.08 full scale) sounds
+#: 70 ms after bounce 6, where no bounce can be (spurious).
+PHONE = dict(
+    file="phone_drop.wav",
+    x0=0.25,
+    offset=0.55,
+    rate=48000,
+    duration=7.0,
+    first_amplitude=2.4,
+    modes=((3300.0, 1.0, 0.0), (5200.0, 0.6, 0.7)),
+    rise=40e-6,
+    decay=0.9e-3,
+    reflections=((2.9e-3, 0.3), (6.3e-3, 0.15)),
+    pink=0.0015,
+    white=0.0005,
+    hum=((50.0, 0.006), (150.0, 0.002)),
+    missed=24,
+    missed_gain=0.003,
+    spurious_after=6,
+    spurious_delay=0.070,
+    spurious=dict(frequency=1700.0, amplitude=0.08, decay=0.6e-3),
+)
+
+#: The phyphox exports: the same ball dropped from rest from several heights (lowest
+#: point above the floor), each recording with its own clock (the release is at `offset`
+#: on it). The app times each impact to the audio sample (48 kHz): the recorded time is
+#: the onset + offset + N(0, (21 µs)²), rounded to the sample grid, printed to 1 µs.
+#: `bounces` regular rows are written; the 30 cm export then misses a quiet bounce, hears
+#: one more, an echo 130 ms later and the echo's duplicate (interval 0.000).
+PHYPHOX = (
+    dict(file="phyphox_drop_10cm.csv", x0=0.10, offset=1.8734, bounces=14, sep=",", decimal=".", quote=True),
+    dict(file="phyphox_drop_15cm.csv", x0=0.15, offset=0.9412, bounces=14, sep=";", decimal=",", quote=True),
+    dict(
+        file="phyphox_drop_22cm.csv", x0=0.22, offset=2.4567, bounces=15, sep="\t", decimal=".", quote=False
+    ),
+    dict(
+        file="phyphox_drop_30cm.csv",
+        x0=0.30,
+        offset=1.2345,
+        bounces=15,
+        sep=",",
+        decimal=".",
+        quote=True,
+        faulty_ending=dict(echo_delay=0.130),
+    ),
+)
+PHYPHOX_TIMING = dict(rate=48000, noise=21e-6, decimals=6)
+PHYPHOX_HEADER = ("Event time (s)", "Interval (s)")
+
+
+def bouncing_parameters(restitution: float) -> tuple[float, float]:
+    """(κ [N/m], k_r [N·s/m]) of the raw recordings' ball for one bounce's restitution."""
+    return true_parameters(dict(BOUNCING, restitution=restitution))
+
+
+@jax.jit
+def _first_bounce(events):
+    return jaxunilat.impact_times(events, 1)[0], jaxunilat.apexes(events, 3)
+
+
+def bounces(x0: float, until: float, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """A drop from rest at height `x0` (m), bounce by bounce, until an onset passes `until` (s).
+
+    Each bounce is its own event-mode run, from one apex (the release first) to the
+    next, with its own κ_i, k_r_i from e_i = e (1 + scatter N(0, 1)).
+
+    **Returns:** `onset` (s since the release), `speed` (impact speed, m/s), `restitution` (e_i).
+    """
+    g = GRAVITY
+    t_apex, h_apex = 0.0, x0
+    onset, speed, e_i = [], [], []
+    while True:
+        e = BOUNCING["restitution"] * (1.0 + BOUNCING["scatter"] * rng.standard_normal())
+        kappa, k_r = bouncing_parameters(e)
+        ball = jaxunilat.Ball(
+            kappa=kappa,
+            k_r=k_r,
+            mass=BOUNCING["mass"],
+            gravity=g,
+            drag=BOUNCING["drag"],
+            lower=0.0,
+            upper=None,
+        )
+        span = 2.5 * math.sqrt(2.0 * h_apex / g) + 5e-3  # to past the next apex
+        sol = jaxunilat.simulate(
+            ball,
+            [h_apex, 0.0],
+            (t_apex, t_apex + span),
+            solver="event",
+            rtol=TOL,
+            atol=TOL,
+            samples=2,
+            outputs=("x",),
+        )
+        hit, (ta, ha) = _first_bounce(sol.events)
+        hit, ta, ha = float(hit), np.asarray(ta), np.asarray(ha)
+        after = np.flatnonzero(np.isfinite(ta) & (ta > hit))
+        if not math.isfinite(hit) or not after.size:
+            raise RuntimeError(f"bounce {len(onset) + 1}: no impact and rebound apex within {span:.3f} s")
+        if hit > until:
+            break
+        if len(onset) >= 400:
+            raise RuntimeError(f"more than 400 bounces before t = {until} s: the ball comes to rest first")
+        onset.append(hit)
+        speed.append(-float(jaxunilat.contact_table(sol, ball)["v_in"][0]))
+        e_i.append(e)
+        t_apex, h_apex = float(ta[after[0]]), float(ha[after[0]])
+    return dict(onset=np.asarray(onset), speed=np.asarray(speed), restitution=np.asarray(e_i))
+
+
+def _raw_rngs() -> dict:
+    children = np.random.SeedSequence(SEED).spawn(1 + max(RAW_SEEDS["phyphox"]))
+    rng = lambda i: np.random.default_rng(children[i])  # noqa: E731
+    return dict(
+        phone_bounces=rng(RAW_SEEDS["phone_bounces"]),
+        phone_noise=rng(RAW_SEEDS["phone_noise"]),
+        phyphox=[rng(i) for i in RAW_SEEDS["phyphox"]],
+    )
+
+
+def phone_truth(rngs: dict | None = None) -> dict:
+    """The truth of `phone_drop.wav`, on the recording's clock.
+
+    **Returns:** `onset` (s: every impact onset in the recording, the click starts),
+    `speed` (m/s), `restitution` (e_i), `rendered` (False for the missed quiet bounce),
+    `spurious` (s: the start of the handling click).
+    """
+    rngs = rngs or _raw_rngs()
+    p = PHONE
+    run = bounces(p["x0"], p["duration"] - p["offset"] - 0.05, rngs["phone_bounces"])
+    onset = run["onset"] + p["offset"]
+    rendered = np.ones(len(onset), dtype=bool)
+    rendered[p["missed"] - 1] = False
+    spurious = float(onset[p["spurious_after"] - 1] + p["spurious_delay"])
+    return dict(
+        onset=onset, speed=run["speed"], restitution=run["restitution"], rendered=rendered, spurious=spurious
+    )
+
+
+def _click(s: np.ndarray, modes, rise: float, decay: float) -> np.ndarray:
+    """A click that starts at s = 0 (s: time since its start, s): damped modes (frequency
+    Hz, weight, phase) under a rise 1 − exp(−s/rise) and a decay exp(−s/decay)."""
+    s = np.maximum(s, 0.0)
+    shape = (1.0 - np.exp(-s / rise)) * np.exp(-s / decay)
+    return shape * sum(w * np.sin(2 * np.pi * f * s + phi) for f, w, phi in modes)
+
+
+def render_phone(truth: dict, rng: np.random.Generator) -> np.ndarray:
+    """The samples of `phone_drop.wav` (int16) for `truth` (see `PHONE`)."""
+    p = PHONE
+    rate = p["rate"]
+    n = int(round(p["duration"] * rate))
+    t = np.arange(n) / rate
+    x = np.zeros(n)
+    span = int(0.03 * rate)
+
+    def add(start: float, amplitude: float, modes, decay: float, reflections) -> None:
+        i0 = int(math.floor(start * rate)) + 1  # the first sample after the click starts
+        idx = np.arange(i0, min(i0 + span, n))
+        s = t[idx] - start
+        wave = _click(s, modes, p["rise"], decay)
+        for delay, gain in reflections:
+            wave += gain * _click(s - delay, modes, p["rise"], decay) * (s >= delay)
+        x[idx] += amplitude * wave
+
+    v1 = truth["speed"][0]
+    for onset, v, shown in zip(truth["onset"], truth["speed"], truth["rendered"], strict=True):
+        gain = 1.0 if shown else p["missed_gain"]
+        add(onset, gain * p["first_amplitude"] * (v / v1) ** 2, p["modes"], p["decay"], p["reflections"])
+    sp = p["spurious"]
+    add(truth["spurious"], sp["amplitude"], ((sp["frequency"], 1.0, 0.0),), sp["decay"], ())
+    # Room noise: pink (1/f power, above 20 Hz) + white + hum.
+    spectrum = np.fft.rfft(rng.standard_normal(n))
+    f = np.fft.rfftfreq(n, 1.0 / rate)
+    spectrum *= np.where(f > 20.0, 1.0 / np.sqrt(np.maximum(f, 20.0) / 20.0), 0.0)
+    pink = np.fft.irfft(spectrum, n)
+    x += p["pink"] * pink / np.std(pink) + p["white"] * rng.standard_normal(n)
+    for freq, amp in p["hum"]:
+        x += amp * np.sin(2 * np.pi * freq * t + rng.uniform(0, 2 * np.pi))
+    return np.clip(np.round(x * 32768.0), -32768, 32767).astype(np.int16)
+
+
+def _wav_bytes(samples: np.ndarray, rate: int) -> bytes:
+    buf = io.BytesIO()
+    with wave.open(buf, "wb") as w:
+        w.setnchannels(1)
+        w.setsampwidth(2)
+        w.setframerate(rate)
+        w.writeframes(samples.astype("<i2").tobytes())
+    return buf.getvalue()
+
+
+def phyphox_throws(rngs: dict | None = None) -> list[dict]:
+    """The phyphox exports' truth and rows, one dict per export (in `PHYPHOX` order).
+
+    **Returns** per export: `onset` (s, recording clock: every true onset up to the last
+    row), `recorded` (s: the times written, row by row), `kind` (per row: "bounce",
+    "echo" or "duplicate"), `bounce` (per row: the true onset's index, -1 for
+    echo/duplicate rows), `missed` (indices of true onsets with no row).
+    """
+    rngs = rngs or _raw_rngs()
+    out = []
+    for spec, rng in zip(PHYPHOX, rngs["phyphox"], strict=True):
+        total = spec["bounces"] + (2 if "faulty_ending" in spec else 0)
+        fall = math.sqrt(2 * spec["x0"] / GRAVITY)
+        # Simulate far enough for `total` onsets (the intervals shrink by about e each bounce).
+        horizon = fall + 2 * fall * BOUNCING["restitution"] * total
+        run = bounces(spec["x0"], horizon, rng)
+        onset = run["onset"][:total] + spec["offset"]
+        if len(onset) < total:
+            raise RuntimeError(f"{spec['file']}: {len(onset)} onsets simulated, {total} needed")
+        timing = PHYPHOX_TIMING
+        heard = onset + timing["noise"] * rng.standard_normal(total)
+        heard = np.round(heard * timing["rate"]) / timing["rate"]
+        rows, kind, index, missed = list(heard[: spec["bounces"]]), ["bounce"] * spec["bounces"], [], []
+        index = list(range(spec["bounces"]))
+        if "faulty_ending" in spec:
+            missed.append(spec["bounces"])  # too quiet: no row
+            rows.append(heard[spec["bounces"] + 1])
+            kind.append("bounce")
+            index.append(spec["bounces"] + 1)
+            echo = (
+                np.round((rows[-1] + spec["faulty_ending"]["echo_delay"]) * timing["rate"]) / timing["rate"]
+            )
+            rows += [echo, echo]
+            kind += ["echo", "duplicate"]
+            index += [-1, -1]
+        out.append(
+            dict(
+                spec=spec,
+                onset=onset,
+                restitution=run["restitution"][:total],
+                recorded=np.round(np.asarray(rows), timing["decimals"]),
+                kind=kind,
+                bounce=np.asarray(index),
+                missed=np.asarray(missed, dtype=int),
+            )
+        )
+    return out
+
+
+def phyphox_text(throw: dict) -> str:
+    """The export file of one throw: a header row, then event time and interval per row
+    (the first row's interval empty), in the throw's separator and decimal mark."""
+    spec = throw["spec"]
+    sep, dec = spec["sep"], spec["decimal"]
+    header = [f'"{h}"' if spec["quote"] else h for h in PHYPHOX_HEADER]
+    digits = PHYPHOX_TIMING["decimals"]
+    times = throw["recorded"]
+    lines = [sep.join(header)]
+    for i, t in enumerate(times):
+        cells = [f"{t:.{digits}f}", "" if i == 0 else f"{times[i] - times[i - 1]:.{digits}f}"]
+        lines.append(sep.join(c.replace(".", dec) for c in cells))
+    return "\r\n".join(lines) + "\r\n"
+
+
+def generate_raw() -> tuple[dict[str, bytes], dict]:
+    """The raw recordings (file name -> bytes: the WAV and the phyphox exports) and their
+    truth: `phone_truth`'s, with the phyphox exports' (`phyphox_throws`) under "throws"."""
+    rngs = _raw_rngs()
+    truth = phone_truth(rngs)
+    out = {PHONE["file"]: _wav_bytes(render_phone(truth, rngs["phone_noise"]), PHONE["rate"])}
+    truth["throws"] = phyphox_throws(rngs)
+    for throw in truth["throws"]:
+        out[throw["spec"]["file"]] = phyphox_text(throw).encode("utf-8")
+    return out, truth
+
+
+def phone_truth_table(truth: dict) -> str:
+    """The README table of `phone_drop.wav`'s true onsets (markdown)."""
+    rows = [
+        "| bounce | onset (s, recording clock) | impact speed (m/s) | e_i | in the recording |",
+        "|---|---|---|---|---|",
+    ]
+    for i, (t, v, e, shown) in enumerate(
+        zip(truth["onset"], truth["speed"], truth["restitution"], truth["rendered"], strict=True)
+    ):
+        what = "click" if shown else "MISSED (rendered below the noise)"
+        rows.append(f"| {i + 1} | {t:.6f} | {v:.4f} | {e:.5f} | {what} |")
+    after = PHONE["spurious_after"]
+    rows.append(
+        f"| - | {truth['spurious']:.6f} | - | - | SPURIOUS handling click ({PHONE['spurious_delay'] * 1e3:g} ms after bounce {after}) |"
+    )
+    return "\n".join(rows)
+
+
+def phyphox_truth_lines(throws: list[dict]) -> list[str]:
+    """The README lines of the phyphox exports' true onsets."""
+    return [f"- `{th['spec']['file']}`: " + ", ".join(f"{t:.6f}" for t in th["onset"]) for th in throws]
+
+
+def _table_rows(text: str) -> list[list[str]]:
+    return [
+        [c.strip() for c in line.strip("|").split("|")]
+        for line in text.splitlines()
+        if re.match(r"\| (\d+|-) \|", line)
+    ]
+
+
+def _close(a: str, b: str, tol: float) -> bool:
+    if a == b:
+        return True
+    try:
+        return abs(float(a) - float(b)) <= tol
+    except ValueError:
+        return False
+
+
+def _check_raw(fresh: dict[str, bytes], truth: dict, directory: str) -> list[str]:
+    """Compare regenerated raw recordings with the files: identical bytes, or (a rounding
+    flip from ~1e-12 solver differences between machines) the WAV samples within 1 LSB
+    and every phyphox number within one unit of its last printed digit; and the README's
+    truth table of the WAV within the same precision."""
+    problems = []
+    specs = {spec["file"]: spec for spec in PHYPHOX}
+    for name, data in fresh.items():
+        path = os.path.join(directory, name)
+        if not os.path.isfile(path):
+            problems.append(f"{name}: missing")
+            continue
+        with open(path, "rb") as f:
+            stored = f.read()
+        if stored == data:
+            continue
+        if name.endswith(".wav"):
+            a, b = (np.frombuffer(x[44:], dtype="<i2").astype(int) for x in (stored, data))
+            if stored[:44] != data[:44] or len(a) != len(b) or np.max(np.abs(a - b)) > 1:
+                problems.append(f"{name}: the header differs or samples differ by more than 1 LSB")
+            continue
+        spec = specs[name]
+        sa, sb = (x.decode("utf-8").split("\r\n") for x in (stored, data))
+        bad = len(sa) != len(sb) or sa[0] != sb[0]
+        for la, lb in zip(sa[1:], sb[1:], strict=False) if not bad else ():
+            fa = [c.replace(spec["decimal"], ".") for c in la.split(spec["sep"])]
+            fb = [c.replace(spec["decimal"], ".") for c in lb.split(spec["sep"])]
+            tol = 1.01 * 10.0 ** -PHYPHOX_TIMING["decimals"]
+            if len(fa) != len(fb) or not all(_close(x, y, tol) for x, y in zip(fa, fb, strict=True)):
+                bad = True
+        if bad:
+            problems.append(f"{name}: rows differ beyond the last printed digit")
+    with open(os.path.join(directory, "README.md"), encoding="utf-8") as f:
+        readme = f.read()
+    stated = _table_rows(readme)
+    table = _table_rows(phone_truth_table(truth))
+    if len(stated) != len(table) or not all(
+        len(r) == len(s)
+        and all(_close(x, y, 1.01e-6) for x, y in zip(r[:2], s[:2], strict=True))
+        and r[4] == s[4]
+        for r, s in zip(table, stated, strict=False)
+    ):
+        problems.append("README.md: the phone_drop.wav truth table differs from the regenerated one")
+    for line in phyphox_truth_lines(truth["throws"]):
+        head, numbers = line.split(": ", 1)
+        stated = next((x for x in readme.splitlines() if x.startswith(head + ": ")), None)
+        values = stated.split(": ", 1)[1].split(", ") if stated else []
+        expect = numbers.split(", ")
+        if len(values) != len(expect) or not all(
+            _close(a, b, 1.01e-6) for a, b in zip(values, expect, strict=True)
+        ):
+            problems.append(f"README.md: the true onsets of {head[2:]} differ from the regenerated ones")
+    return problems
+
+
 def _resolution(name: str, column: str) -> float:
     if name == "drop_impacts.csv":
         return 10.0 ** -DROP_IMPACTS["decimals"]
@@ -220,8 +611,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     datasets = generate()
+    raw, truth = generate_raw()
     if args.check:
-        problems = check(datasets)
+        problems = check(datasets) + _check_raw(raw, truth, HERE)
         for p in problems:
             print(f"MISMATCH {p}")
         print("data/: " + ("all files reproduced" if not problems else f"{len(problems)} mismatches"))
@@ -230,11 +622,18 @@ def main(argv: list[str] | None = None) -> int:
         path = os.path.join(HERE, name)
         write_dataset(path, ds, overwrite=True)
         print(f"wrote {path}: {ds.observe}, {ds.num_rows} rows, {os.path.getsize(path)} bytes")
-    for label, spec in (("drop", DROP), ("rackets", RACKETS)):
+    for name, data in raw.items():
+        path = os.path.join(HERE, name)
+        with open(path, "wb") as f:
+            f.write(data)
+        print(f"wrote {path}: {len(data)} bytes")
+    for label, spec in (("drop", DROP), ("rackets", RACKETS), ("raw recordings", BOUNCING)):
         kappa, k_r = true_parameters(spec)
         print(
             f"{label}: e = {spec['restitution']}, t_c = {spec['contact_time']} s -> kappa = {kappa!r} N/m, k_r = {k_r!r} N*s/m"
         )
+    print("phone_drop.wav truth (data/README.md):")
+    print(phone_truth_table(truth))
     return 0
 
 

@@ -23,6 +23,15 @@ from ._fit import (  # noqa: E402
     default_optimizer as default_optimizer,
     fit as fit,
 )
+from ._import import ImportResult as ImportResult, Rejected as Rejected  # noqa: E402
+from ._import_audio import (  # noqa: E402
+    OnsetDetection as OnsetDetection,
+    WavAudio as WavAudio,
+    detect_onsets as detect_onsets,
+    import_wav as import_wav,
+    read_wav as read_wav,
+)
+from ._import_tables import import_phyphox as import_phyphox, import_video as import_video  # noqa: E402
 from ._plot import plot_fit as plot_fit  # noqa: E402
 from ._problem import NUISANCE as NUISANCE, PARAMETERS as PARAMETERS  # noqa: E402
 from ._qualify import (  # noqa: E402

@@ -329,6 +329,7 @@ def _add_simulate(commands) -> None:
 _COMMANDS = (
     _add_simulate,
     _lazy("identify._cli_identify", "add_identify"),
+    _lazy("identify._cli_import", "add_import"),
     _lazy("identify._cli_qualify", "add_qualify"),
     _lazy("jaxunilat._cli_coupling", "add_sensitivity"),
     _lazy("jaxunilat._cli_coupling", "add_reproduce"),

@@ -18,7 +18,17 @@ from scipy.optimize import brentq
 from identify import load_dataset
 
 DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data")
-FILES = sorted(f for f in os.listdir(DATA) if f.endswith(".csv"))
+
+
+def _is_data_file(name: str) -> bool:
+    """A jaxunilat-data file (the raw recordings for `jaxunilat import` are not)."""
+    if not name.endswith(".csv"):
+        return False
+    with open(os.path.join(DATA, name), encoding="utf-8") as f:
+        return f.readline().startswith("# jaxunilat-data")
+
+
+FILES = sorted(f for f in os.listdir(DATA) if _is_data_file(f))
 
 
 def kv_parameters(e, t_c, m):

@@ -1,0 +1,296 @@
+"""What the importers share: the result object, the defaults, the interval analysis.
+
+An importer turns a recording (a WAV file, a phyphox export, a video-tracking table)
+into an `identify.Dataset` and says what it did: which onsets it kept, which it left
+out and why, what looked suspicious, and how noisy the timing is. Nothing is dropped
+silently: every onset left out is a `Rejected` entry, and `ImportResult.text()` writes
+them as `##` comment lines of the data file.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+
+import numpy as np
+
+from ._data import DEFAULT_GRAVITY, Dataset, _parse, format_dataset
+
+#: An ITTF 40 mm table-tennis ball, kg.
+DEFAULT_MASS = 2.7e-3
+#: Quadratic drag k = 1/terminal speed of that ball, s/m.
+DEFAULT_DRAG = 0.12
+#: The restitution assumed when the release height x0 is estimated from the first interval.
+ASSUMED_RESTITUTION = 0.95
+#: Successive bounce intervals of a ball: the ratio I[k+1]/I[k] lies in this range
+#: (restitution, drag and timing noise included); outside it an onset is misplaced.
+RATIO_RANGE = (0.75, 1.1)
+
+
+@dataclasses.dataclass(frozen=True)
+class Rejected:
+    """An onset (or a row) an importer left out.
+
+    - `time`: s, on the recording's clock (NaN if the row had no usable time).
+    - `reason`: why, in words.
+    - `line`: the source line (tables) or None (audio).
+    """
+
+    time: float
+    reason: str
+    line: int | None = None
+
+    def describe(self) -> str:
+        """One line: where, when and why."""
+        where = f"line {self.line}: " if self.line is not None else ""
+        when = f"t = {self.time:.6f} s: " if math.isfinite(self.time) else ""
+        return f"{where}{when}{self.reason}"
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class ImportResult:
+    """An imported recording: the data set and the report of how it was made.
+
+    **Fields:**
+
+    - `dataset`: the `identify.Dataset` (SI units; `source` names the file and importer).
+    - `importer`: `"wav"`, `"phyphox"` or `"video"`.
+    - `source`: the file that was read (it is never modified).
+    - `accepted`: the times kept, s on the recording's clock (impacts: the onsets;
+      video: the sample times before the shift to the first frame).
+    - `rejected`: the onsets or rows left out, each with its reason.
+    - `warnings`: suspicious but kept (an interval that breaks the decay pattern, ...).
+    - `noise_estimate`: the timing-noise estimate, s (impacts), or None.
+    - `noise_method`: how it was estimated, in words.
+    - `notes`: facts about defaults and estimates, written as `##` comments.
+    - `info`: one-line facts about the source (format, rate, columns, ...).
+    - `detection`: the onset detection of a WAV import (`OnsetDetection`), else None.
+    """
+
+    dataset: Dataset
+    importer: str
+    source: str
+    accepted: np.ndarray
+    rejected: tuple[Rejected, ...] = ()
+    warnings: tuple[str, ...] = ()
+    noise_estimate: float | None = None
+    noise_method: str = ""
+    notes: tuple[str, ...] = ()
+    info: tuple[str, ...] = ()
+    detection: object | None = None
+
+    def summary(self) -> str:
+        """The report, several lines: source, onsets kept and left out, noise, data set."""
+        ds = self.dataset
+        lines = [("source", f"{self.source} ({self.importer})")]
+        lines += [("", text) for text in self.info]
+        what = "onsets" if ds.observe == "impacts" else "samples"
+        lines.append(("kept", f"{len(ds.t)} {what}"))
+        lines.append(("left out", f"{len(self.rejected)}" + ("" if self.rejected else " (none)")))
+        lines += [("  -", r.describe()) for r in self.rejected]
+        lines += [("warning", w) for w in self.warnings]
+        if self.noise_estimate is not None:
+            unit, scale = ("ms", 1e3) if ds.observe == "impacts" else ("mm", 1e3)
+            lines.append(("noise", f"{self.noise_estimate * scale:.4g} {unit} ({self.noise_method})"))
+        elif self.noise_method:
+            lines.append(("noise", self.noise_method))
+        lines += [("note", n) for n in self.notes]
+        meta = (
+            f"scene = {ds.scene}, observe = {ds.observe}, {ds.num_rows} rows, mass = {ds.mass:g} kg, "
+            f"drag = {ds.drag:g} s/m, x0 = {ds.x0:.6g} m, v0 = {ds.v0:g} m/s, "
+            + ("noise = none (a fit estimates it)" if ds.noise is None else f"noise = {ds.noise:.4g}")
+        )
+        lines.append(("data set", meta))
+        return "\n".join(f"{key:<10} {value}" if key else f"{'':<10} {value}" for key, value in lines)
+
+    def text(self) -> str:
+        """The data file: `format_dataset` with the notes and left-out onsets as `##` lines."""
+        return _with_comments(format_dataset(self.dataset), self.comment_lines())
+
+    def comment_lines(self) -> list[str]:
+        """The `##` free-comment lines written before the column header."""
+        out = [f"## imported by jaxunilat import {self.importer} from {os.path.basename(self.source)}"]
+        out += [f"## {n}" for n in self.notes]
+        if self.noise_estimate is not None and self.dataset.observe == "impacts":
+            out.append(f"## timing-noise estimate: {self.noise_estimate:.3g} s ({self.noise_method})")
+        out += [f"## left out: {r.describe()}" for r in self.rejected]
+        out += [f"## warning: {w}" for w in self.warnings]
+        return [_one_line(line) for line in out]
+
+    def write(self, path, *, overwrite: bool = False) -> None:
+        """Write `text()` to `path` (refuses to replace a file unless `overwrite`, and
+        never writes over the source)."""
+        from jaxunilat._io import check_output_paths
+
+        name = os.fspath(path)
+        check_output_paths(("path", name), inputs=(("source", self.source),))
+        text = self.text()
+        _parse(text, name)  # what is written reads back
+        try:
+            with open(name, "w" if overwrite else "x", encoding="utf-8", newline="\n") as f:
+                f.write(text)
+        except FileExistsError:
+            raise ValueError(f"{name}: the file exists; pass overwrite=True to replace it") from None
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def _with_comments(text: str, comments: list[str]) -> str:
+    """Insert `##` lines after the metadata, before the column header."""
+    lines = text.split("\n")
+    header = next(i for i, line in enumerate(lines) if not line.startswith("#"))
+    return "\n".join(lines[:header] + comments + lines[header:])
+
+
+def check_options(*, mass, drag, x0, v0, noise) -> None:
+    """Validate the metadata options (None: the default); `ValueError` names the flag."""
+    from jaxunilat._validate import check_range
+
+    check_range("mass", mass, lo=0.0, lo_open=True, unit="kg", allow_none=True)
+    check_range("drag", drag, lo=0.0, unit="s/m", allow_none=True)
+    check_range("x0", x0, lo=0.0, unit="m", allow_none=True)
+    check_range("v0", v0, unit="m/s", allow_none=True)
+    check_range("noise", noise, lo=0.0, lo_open=True, allow_none=True)
+
+
+def x0_from_first_interval(interval: float, *, restitution: float = ASSUMED_RESTITUTION) -> float:
+    """The release height, m, that a drop from rest needs for a first bounce interval
+    `interval` (s), with restitution `restitution` and no drag: the first impact speed is
+    v1 = g T1 / (2 e), so x0 = v1² / (2 g) = g T1² / (8 e²)."""
+    return DEFAULT_GRAVITY * interval**2 / (8.0 * restitution**2)
+
+
+def source_text(path: str, importer: str) -> str:
+    """The `source` metadata: the file's base name and the importer, one line."""
+    return _one_line(f"{os.path.basename(path)} (jaxunilat import {importer})")
+
+
+def impacts_dataset(
+    times: np.ndarray, *, source: str, importer: str, mass, drag, x0, v0, noise
+) -> tuple[Dataset, list[str]]:
+    """An `observe = impacts` drop data set with the importers' defaults, and the notes.
+
+    `times` are the onsets (s, recording clock, strictly increasing, at least 2).
+    """
+    times = np.asarray(times, dtype=float)
+    notes = []
+    if len(times) < 2:
+        raise ValueError(
+            f"{source}: {len(times)} impact onset(s) kept; a data set of impacts needs at least 2"
+        )
+    if x0 is None:
+        first = float(times[1] - times[0])
+        x0 = x0_from_first_interval(first)
+        notes.append(
+            f"x0 = {x0:.6g} m estimated from the first interval {first:.6f} s assuming e = "
+            f"{ASSUMED_RESTITUTION} and no drag (x0 = g T1^2 / (8 e^2)); measure it and pass --x0 if you can"
+        )
+    if v0 is None:
+        v0 = 0.0
+        notes.append("v0 = 0 (released from rest)")
+    ds = Dataset(
+        scene="drop",
+        observe="impacts",
+        mass=DEFAULT_MASS if mass is None else mass,
+        drag=DEFAULT_DRAG if drag is None else drag,
+        x0=x0,
+        v0=v0,
+        noise=noise,
+        t=times,
+        source=source_text(source, importer),
+    )
+    if mass is None:
+        notes.append(f"mass = {DEFAULT_MASS} kg (default: a 40 mm ITTF ball)")
+    if drag is None:
+        notes.append(f"drag = {DEFAULT_DRAG} s/m (default: a 40 mm ITTF ball)")
+    return ds, notes
+
+
+# -- the interval sequence ----------------------------------------------------------------
+
+
+@dataclasses.dataclass(frozen=True)
+class IntervalFit:
+    """A smooth fit to a bounce-interval sequence.
+
+    For a constant restitution e and no drag, the interval that starts at onset t_k is
+    I_k = (1 − e)(t_∞ − t_k): a straight line in t_k, whatever bounces were missed. The
+    fit is a quadratic in t_k (drag bends the line), robust: intervals far from it are
+    excluded and refitted.
+
+    - `start`: the onset each interval starts at, s.
+    - `interval`: the intervals, s.
+    - `expected`: the fit at `start`, s.
+    - `inlier`: which intervals the final fit used.
+    - `scatter`: robust standard deviation of the inliers' residuals, s.
+    """
+
+    start: np.ndarray
+    interval: np.ndarray
+    expected: np.ndarray
+    inlier: np.ndarray
+    scatter: float
+
+
+def fit_intervals(times: np.ndarray) -> IntervalFit | None:
+    """The robust smooth fit of the intervals of `times` (s); None with fewer than 5 intervals."""
+    times = np.asarray(times, dtype=float)
+    start, interval = times[:-1], np.diff(times)
+    n = len(interval)
+    if n < 5:
+        return None
+    degree = 2 if n >= 7 else 1
+    scale = max(float(start[-1] - start[0]), 1e-9)
+    u = (start - start[0]) / scale
+    inlier = np.ones(n, dtype=bool)
+    expected = np.full(n, np.median(interval))
+    scatter = 0.0
+    for _ in range(6):
+        coef = np.polyfit(u[inlier], interval[inlier], degree)
+        expected = np.polyval(coef, u)
+        residual = interval - expected
+        mad = float(np.median(np.abs(residual[inlier] - np.median(residual[inlier]))))
+        scatter = 1.4826 * mad
+        # Beyond 4 robust sd and 3% of the interval: not part of the smooth decay.
+        limit = np.maximum(4.0 * scatter, 0.03 * np.abs(expected))
+        new = np.abs(residual) <= limit
+        if new.sum() < degree + 3 or np.array_equal(new, inlier):
+            break
+        inlier = new
+    if scatter <= 0:  # half the residuals exactly zero: use the rms instead
+        dof = max(int(inlier.sum()) - (degree + 1), 1)
+        scatter = float(np.sqrt(np.sum((interval - expected)[inlier] ** 2) / dof))
+    return IntervalFit(start=start, interval=interval, expected=expected, inlier=inlier, scatter=scatter)
+
+
+def interval_warnings(times: np.ndarray, fit: IntervalFit | None, lines=None) -> list[str]:
+    """Warnings for intervals that break the smooth decay (kept, not dropped).
+
+    `lines`: the source line of each onset, for the messages (or None).
+    """
+    if fit is None:
+        return []
+    out = []
+    for k in np.flatnonzero(~fit.inlier):
+        got, exp = float(fit.interval[k]), float(fit.expected[k])
+        ratio = got / exp if exp > 0 else math.inf
+        if 1.6 <= ratio <= 2.4:
+            why = "about twice the expected: a missed bounce?"
+        elif ratio < 1:
+            why = "shorter than the decay allows: an echo or a spurious onset?"
+        else:
+            why = "longer than the decay allows: a missed bounce or a spurious onset?"
+        where = f"line {lines[k + 1]}: " if lines is not None else ""
+        out.append(
+            f"{where}interval {got:.6f} s (onset {k + 1} -> {k + 2}, ending at t = {times[k + 1]:.6f} s) "
+            f"vs {exp:.6f} s expected from the smooth decay: {why}"
+        )
+    return out
+
+
+def ratio_ok(r: float) -> bool:
+    """Whether a successive-interval ratio I[k+1]/I[k] is one a bouncing ball can have."""
+    return RATIO_RANGE[0] <= r <= RATIO_RANGE[1]
