@@ -429,7 +429,7 @@ def _format_entry(name: str, entry: dict, unit: str, converged: bool = True) -> 
     if not converged:
         return f"{name:<7}= {value:<12.6g} (no interval: the fit did not converge) {unit}"
     lo, hi = entry["ci95"]
-    rel = f"({stderr / abs(value):.2%})" if math.isfinite(stderr) and value else "(inf)"
+    rel = f"({_percent(stderr / abs(value))})" if math.isfinite(stderr) and value else "(inf)"
     return f"{name:<7}= {value:<12.6g} +/- {stderr:<10.4g} {rel:<9} 95% CI [{lo:.6g}, {hi:.6g}] {unit}"
 
 
@@ -437,4 +437,9 @@ def _halfwidth(entry) -> str:
     lo, hi = entry["ci95"]
     if not (math.isfinite(lo) and math.isfinite(hi)):
         return "  (95% CI unbounded)"
-    return f"  (95% half-width {(hi - lo) / 2 / abs(entry['value']):.2%})"
+    return f"  (95% half-width {_percent((hi - lo) / 2 / abs(entry['value']))})"
+
+
+def _percent(fraction: float) -> str:
+    """A relative width as a percentage, or '> 1000%' for an unbounded one."""
+    return f"{fraction:.2%}" if fraction <= 10.0 else "> 1000%"

@@ -29,6 +29,9 @@ DEFAULT_BOUNDS = {
     "v0": (-1e3, 1e3),
     "offset": (-1e4, 1e4),
 }
+#: The residual scale a fit starts from when the files state no noise: a real onset's
+#: scatter (s) and a video's or a ruler's resolution (m).
+NOMINAL_NOISE = {"impacts": 5e-4, "trace": 1e-3, "apex": 1e-3}
 #: Hunt–Crossley's κ (N/m^1.5) and k_r = χκ (N·s/m^2.5) run far larger than Kelvin–Voigt's.
 LAW_BOUNDS = {"hunt-crossley": {"kappa": (1.0, 1e15), "k_r": (1e-12, 1e14)}}
 
@@ -75,7 +78,9 @@ def _noise(datasets) -> tuple[bool, np.ndarray]:
             "a joint fit of different observation types needs the noise of every file (the residual "
             f"scale cannot be shared between metres and seconds); missing in: {_missing_noise(datasets)}"
         )
-    return False, np.ones(len(datasets))
+    # A nominal scale only balances the data against the steering prior's rows and
+    # sets the LM tolerances' units; the uncertainty rescales it by the residual scatter.
+    return False, np.array([NOMINAL_NOISE[d.observe] for d in datasets])
 
 
 def _missing_noise(datasets) -> str:

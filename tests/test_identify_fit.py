@@ -121,7 +121,9 @@ def test_noise_estimated_from_residuals_when_the_file_states_none(reference):
     assert without.sigma_source == "residuals" and with_sigma.sigma_source == "file"
     # s² = Σr²/(N − p) estimates the generating σ = 0.5 mm (N = 1501: to a few percent).
     assert without.sigma == pytest.approx(5e-4, rel=0.1)
-    assert without.kappa == pytest.approx(with_sigma.kappa, rel=1e-6)
+    # The same optimum to well below a standard error (~1.6%): the two fits take different
+    # LM paths (the prior row weighs differently against the nominal and the stated sigma).
+    assert without.kappa == pytest.approx(with_sigma.kappa, rel=1e-4)
     ratio = without.parameters["kappa"]["stderr"] / with_sigma.parameters["kappa"]["stderr"]
     assert ratio == pytest.approx(without.sigma / 5e-4, rel=1e-3)
 
