@@ -163,6 +163,34 @@ class _Where:
         return f"{self.origin}: line {self.end}: {field}"
 
 
+def plausibility_notes(ds: Dataset) -> list[str]:
+    """Warnings for values that are legal but probably a unit slip (grams for kilograms,
+    milliseconds for seconds, millimetres or centimetres for metres). Nothing is changed."""
+    where = ds.path or "data set"
+    notes = []
+    if ds.mass > 0.5:
+        notes.append(f"{where}: mass = {ds.mass:g} kg is heavy for a bouncing ball: grams written as kg?")
+    if ds.t is not None and len(ds.t) > 1:
+        gaps = np.diff(ds.t)
+        if ds.observe == "impacts" and float(np.median(gaps)) > 5.0:
+            notes.append(
+                f"{where}: onsets {float(np.median(gaps)):g} s apart (median) are slow for a bounce: "
+                "milliseconds written as seconds?"
+            )
+    height = ds.x0 if ds.scene == "drop" else None
+    if height is not None and height > 5.0:
+        notes.append(f"{where}: x0 = {ds.x0:g} m is a tall drop: centimetres written as metres?")
+    if ds.noise is not None:
+        scale = {"impacts": 0.05, "trace": 0.05, "apex": 0.05}[ds.observe]
+        if ds.noise > scale:
+            unit = "s" if ds.observe == "impacts" else "m"
+            notes.append(
+                f"{where}: noise = {ds.noise:g} {unit} is larger than a bounce measurement's: "
+                f"{'milliseconds' if unit == 's' else 'millimetres'} written as {'seconds' if unit == 's' else 'metres'}?"
+            )
+    return notes
+
+
 def _range_text(lo, lo_open):
     return ("(" if lo_open else "[") + f"{lo:g}, inf)"
 

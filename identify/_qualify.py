@@ -392,12 +392,10 @@ def _number(fit, keys, where, *, required=True, positive=False):
     for k in keys:
         node = node.get(k) if isinstance(node, dict) else None
     name = ".".join(keys)
-    if (
-        node is None
-        or isinstance(node, bool)
-        or not isinstance(node, (int, float))
-        or not math.isfinite(node)
-    ):
+    if node is not None and (isinstance(node, bool) or not isinstance(node, (int, float))):
+        # A value of the wrong type is a damaged file, never "absent".
+        raise ValueError(f"{where}: {name} = {node!r} must be a number")
+    if node is None or not math.isfinite(node):
         if required:
             raise ValueError(f"{where}: {name} = {node!r} must be a finite number")
         return None
@@ -467,9 +465,23 @@ def qualify_fit(
     _check_samples(samples, seed)
     test = dict(mass=float(mass), drop=float(drop), drag=float(drag), gravity=float(gravity))
     limits = (float(min_height), float(max_height))
-    kappa = _number(fit, ("parameters", "kappa", "value"), where, required=False, positive=True)
-    k_r = _number(fit, ("parameters", "k_r", "value"), where, required=False, positive=True)
-    ident = fit.get("identifiable") if isinstance(fit.get("identifiable"), dict) else {}
+    law = fit.get("law", "kelvin-voigt")
+    if law != "kelvin-voigt":
+        raise ValueError(
+            f"{where}: law = {law!r}: the rebound test is simulated with the Kelvin-Voigt law; "
+            "refit with --law kelvin-voigt to qualify"
+        )
+    ident = fit.get("identifiable")
+    if not isinstance(ident, dict) or not all(
+        isinstance(ident.get(k), bool) for k in ("kappa", "k_r", "restitution")
+    ):
+        raise ValueError(
+            f"{where}: identifiable = {ident!r}: expected true/false for kappa, k_r and restitution "
+            "(as written by `jaxunilat identify --json`)"
+        )
+    required = ident["kappa"] and ident["k_r"]
+    kappa = _number(fit, ("parameters", "kappa", "value"), where, required=required, positive=True)
+    k_r = _number(fit, ("parameters", "k_r", "value"), where, required=required, positive=True)
     s_kappa = _number(fit, ("parameters", "kappa", "stderr"), where, required=False)
     s_k_r = _number(fit, ("parameters", "k_r", "stderr"), where, required=False)
     notes = ()

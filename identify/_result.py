@@ -90,6 +90,7 @@ class FitResult:
     row_sigma: np.ndarray | None = None
     sigma_known: bool = False
     datasets_data: list = dataclasses.field(default_factory=list)
+    notes: list = dataclasses.field(default_factory=list)
 
     def criteria(self, used: np.ndarray | None = None) -> dict:
         """χ², AIC and BIC of the fit over the `used` rows (default: its fitted rows).
@@ -216,6 +217,7 @@ class FitResult:
             ],
             "datasets": [_clean_json(d) for d in self.datasets],
             "holdout": None if self.holdout is None else _clean_json(self.holdout),
+            "notes": list(self.notes),
             "profile_kappa": None
             if self.profile is None
             else {
@@ -236,6 +238,7 @@ class FitResult:
             self._report_rows,
             self._report_laws,
             self._report_holdout,
+            self._report_notes,
         )
         return "\n".join(line for section in sections for line in section())
 
@@ -382,6 +385,9 @@ class FitResult:
                 f"    {name:<14} {c['chi2']:>12.6g} {c['aic']:>12.6g} {c['bic']:>12.6g} {c['restitution']:>8.4f}{mark}"
             )
         return lines
+
+    def _report_notes(self) -> list[str]:
+        return ["[[Notes]]", *(f"    {note}" for note in self.notes)] if self.notes else []
 
     def _report_holdout(self) -> list[str]:
         h = self.holdout

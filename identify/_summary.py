@@ -14,6 +14,7 @@ import os
 import jax
 import numpy as np
 
+from ._data import plausibility_notes
 from ._joint import contact_time_of
 from ._kelvin_voigt import restitution_and_contact_time
 from ._problem import PARAMETERS
@@ -188,6 +189,7 @@ def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale) -> Fi
         n_parameters=p,
         joint_z=np.asarray(best.z),
         datasets_data=list(setup.datasets),
+        notes=[note for d in setup.datasets for note in plausibility_notes(d)],
         row_sigma=np.concatenate([np.full(k, s) for k, s in zip(setup.n_rows, setup.sigmas, strict=True)]),
         sigma_known=setup.sigma_known,
     )

@@ -240,3 +240,25 @@ def test_forward_mode_gradient_stage_matches_central_differences(kv_drops):
     # One step with a plain SGD-like optimizer would reveal g; read it off the loss instead:
     _, _, value = step([problem], [index], [w], jnp.asarray(z), state, jnp.ones(6, bool))
     assert float(value) == pytest.approx(cost(z), rel=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("fields", "pattern"),
+    [
+        ({"mass": 2.7}, "grams written as kg"),
+        ({"x0": 30.0}, "centimetres written as metres"),
+        ({"noise": 0.5}, "milliseconds written as seconds"),
+        ({"t": np.array([250.0, 680.0, 1090.0])}, "milliseconds written as seconds"),
+    ],
+)
+def test_unit_slips_are_noted(fields, pattern):
+    from identify._data import plausibility_notes
+
+    base = dict(scene="drop", observe="impacts", mass=MASS, drag=DRAG, x0=0.3, v0=0.0, noise=NOISE)
+    base.setdefault("t", np.array([0.25, 0.68, 1.09]))
+    base.update(fields)
+    notes = plausibility_notes(identify.Dataset(**base))
+    assert len(notes) == 1 and pattern in notes[0]
+    del base["noise"]
+    base.update(mass=MASS, x0=0.3, t=np.array([0.25, 0.68, 1.09]))
+    assert plausibility_notes(identify.Dataset(**base)) == []

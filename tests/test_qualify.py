@@ -269,3 +269,27 @@ def test_cli_errors(tmp_path, capsys, argv, pattern):
     assert pattern in err, err
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()} == snapshot
+
+
+def test_qualify_fit_refuses_a_damaged_or_foreign_fit():
+    """κ missing or mistyped in a fit that says it identified κ is an error, never a silent
+    fall-back to the restitution-only test; so are a damaged `identifiable` and a law the
+    rebound test does not simulate."""
+    missing = fit_json()
+    del missing["parameters"]["kappa"]
+    with pytest.raises(ValueError, match=r"parameters.kappa.value = None must be a finite number"):
+        qualify_fit(missing)
+    mistyped = fit_json()
+    mistyped["parameters"]["kappa"]["value"] = "27000"
+    with pytest.raises(ValueError, match=r"parameters.kappa.value = '27000' must be a number"):
+        qualify_fit(mistyped)
+    mistyped = fit_json(identifiable=False)
+    mistyped["parameters"]["k_r"]["value"] = [0.36]
+    with pytest.raises(ValueError, match=r"parameters.k_r.value = \[0.36\] must be a number"):
+        qualify_fit(mistyped)
+    no_verdicts = fit_json()
+    del no_verdicts["identifiable"]
+    with pytest.raises(ValueError, match="identifiable = None: expected true/false"):
+        qualify_fit(no_verdicts)
+    with pytest.raises(ValueError, match="law = 'hunt-crossley'"):
+        qualify_fit(fit_json(law="hunt-crossley"))
