@@ -46,10 +46,10 @@ from ._initial import CONTACT_TIME_GUESS
 from ._joint import Layout
 from ._problem import LAWS, LOG_PARAMETERS, NUISANCE, PARAMETERS
 from ._result import FitResult
-from ._robust import THRESHOLD, Rows, cauchy_weights, flag_outliers, robust_scale
+from ._robust import THRESHOLD, RatioResiduals, Rows, cauchy_weights, flag_outliers, robust_scale
 from ._setup import build, start_point, start_points
 from ._summary import derived_quantities, summarize_fit
-from ._uncertainty import Z95, covariance
+from ._uncertainty import Z95, covariance, goodness_of_fit
 
 METHODS = ("lm", "optax")
 #: Levenberg–Marquardt damping divisor after an accepted step. Along the κ–k_r ridge
@@ -361,12 +361,64 @@ def _fit_law(setup, opts: _Options) -> FitResult:
     if not opts.keep_outliers:
         best, rows, scale = _robust_pass(setup, best, rows, opts)
     best = _final_pass(setup, best, rows, opts)
+    onsets = None
+    if _scatter_model_applies(setup, best, rows):
+        onsets = best
+        _use_ratio_residuals(setup, rows)
+        setup.evaluator.prior = bool(set(setup.layout.index[0, :2]) <= set(setup.free))
+        best = _final_pass(setup, best, rows, opts)
+        onsets = _onset_point(setup, best, onsets)
     initial = dict(restitution=e0, contact_time=CONTACT_TIME_GUESS, source=e_source)
-    result = summarize_fit(setup, best, rows, opts, runs=runs, initial=initial, robust_scale=scale)
+    result = summarize_fit(
+        setup, best, rows, opts, runs=runs, initial=initial, robust_scale=scale, onsets=onsets
+    )
     if opts.profile and setup.layout.index[0, 0] in setup.free:
         result.profile = _profile_kappa(setup, best, rows, result, opts)
     result.wall_s = time.perf_counter() - began
     return result
+
+
+def _scatter_model_applies(setup, best: _Point, rows) -> bool:
+    """Whether impact onsets need the restitution-scatter error model.
+
+    When every file holds impact onsets and their residuals are not explained by a
+    stated timing noise (none stated, or the χ² test fails), the scatter is the ball's:
+    onset residuals then accumulate from bounce to bounce, and least squares on them
+    would take drifts for signal (a contact time of 20 ms fitted to a random walk).
+    """
+    if any(d.observe != "impacts" for d in setup.datasets):
+        return False
+    if not setup.sigma_known:
+        return True
+    n = sum(setup.n_rows)
+    keep = rows.fitted
+    g = goodness_of_fit(
+        float(np.sum(best.r[:n][keep] ** 2)), int(keep.sum()), len(setup.free), sigma_known=True
+    )
+    return g["consistent"] is False
+
+
+def _use_ratio_residuals(setup, rows) -> None:
+    """Switch every file to the log-ratio rows of `RatioResiduals` (kept rows: not outliers)."""
+    ev = setup.evaluator
+    ev.transforms = {
+        f: RatioResiduals(
+            times=setup.times[f], keep=~rows.outlier[rows.of_file(f)], sigma=float(setup.sigmas[f])
+        )
+        for f in range(setup.layout.n_files)
+    }
+
+
+def _onset_point(setup, best: _Point, onsets: _Point) -> _Point:
+    """The onset residuals and Jacobian at the final point (for plots, rms and the χ² test)."""
+    ev = setup.evaluator
+    transforms, prior = ev.transforms, ev.prior
+    ev.transforms, ev.prior = {}, False
+    try:
+        r, jac, _ = ev(best.z)
+    finally:
+        ev.transforms, ev.prior = transforms, prior
+    return dataclasses.replace(onsets, z=best.z, r=r, jac=jac)
 
 
 def _initial_restitution(setup, rows) -> tuple[float, str]:

@@ -123,7 +123,9 @@ class JointEvaluator:
     distinct κ/k_r pair), and `calls` (compiled calls made).
 
     Residual rows are every file's real observations in file order, then the prior's
-    rows when `prior` is on.
+    rows when `prior` is on. `transforms` maps a file to a host-side map
+    (r, J) → (r′, J′) of its rows (the restitution-scatter error model of impact onsets,
+    `identify._robust.RatioResiduals`); it changes what is fitted, not what is compiled.
     """
 
     groups: list[Group]
@@ -136,6 +138,7 @@ class JointEvaluator:
     prior: bool = True
     speed: float = 1.0
     calls: int = 0
+    transforms: dict = dataclasses.field(default_factory=dict)
 
     @property
     def n_data(self) -> int:
@@ -217,7 +220,11 @@ class JointEvaluator:
             for j in shifts:
                 # A shift: r = (prediction + value − data)/σ, so ∂r/∂value = 1/σ.
                 jac[:, self.free.index(j)] = 1.0 / self.sigmas[f]
-            blocks_r.append(r[0])
+            if f in self.transforms:
+                r0, jac = self.transforms[f](r[0], jac)
+            else:
+                r0 = r[0]
+            blocks_r.append(r0)
             blocks_j.append(jac)
             ok = ok and bool(np.all(oks[f][: 1 + 2 * len(fd)]))
         r = np.concatenate(blocks_r)
@@ -241,6 +248,11 @@ class JointEvaluator:
             rows.append(row)
         return np.asarray(rows).reshape(len(rows), len(self.free))
 
+    def _transformed(self, f: int, r: np.ndarray) -> np.ndarray:
+        if f not in self.transforms:
+            return r
+        return self.transforms[f](r, _no_jacobian(len(r)))[0]
+
     def values(self, zs: list[np.ndarray]) -> list[tuple[np.ndarray, bool]]:
         """Residuals at several joint points (batched by the compiled row count)."""
         rows = self.rows
@@ -251,11 +263,15 @@ class JointEvaluator:
             points = [np.stack([z[self.layout.index[f]] for z in padded]) for f in range(self.layout.n_files)]
             res, oks = self._run(points)
             for i, z in enumerate(chunk):
-                r = np.concatenate([res[f][i] for f in range(self.layout.n_files)])
+                r = np.concatenate([self._transformed(f, res[f][i]) for f in range(self.layout.n_files)])
                 if self.prior:
                     r = np.concatenate([r, self.prior_rows(z)])
                 out.append((r, bool(all(oks[f][i] for f in range(self.layout.n_files)))))
         return out
+
+
+def _no_jacobian(n: int) -> np.ndarray:
+    return np.zeros((n, 0))
 
 
 def contact_time_of(law: str, log_kappa: float, log_k_r: float, mass: float, speed: float) -> float:

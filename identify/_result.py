@@ -37,6 +37,9 @@ class FitResult:
     - `converged`, `message`, `iterations` (LM), `gradient_steps` (optax stage).
     - `chi2`: Σ((prediction − data)/σ)²; `sigma`: the noise σ used for the
       uncertainty (from the file, or estimated from the residuals: `sigma_source`).
+      Under the restitution-scatter model of impact onsets (`sigma_source` =
+      "restitution scatter") the fitted rows are log ratios of successive flights,
+      `chi2` is theirs and `sigma` is the relative bounce-to-bounce variation of e.
     - `residuals`: prediction − data, in the data's units.
     - `starts`: the cost and convergence of every start; `initial`: the closed-form
       start; `profile`: the profile likelihood of κ (when asked for).
@@ -278,7 +281,10 @@ class FitResult:
         lines.append(f"    chi-square         = {self.chi2:.6g}")
         lines.append(f"    reduced chi-square = {self.goodness['reduced_chi2']:.6g}")
         unit = "s" if self.data.observe == "impacts" else "m"
-        lines.append(f"    noise sigma        = {self.sigma:.4g} {unit} ({self.sigma_source})")
+        if self.sigma_source == "restitution scatter":
+            lines.append(f"    noise sigma        = {self.sigma:.3%} of e per bounce (restitution scatter)")
+        else:
+            lines.append(f"    noise sigma        = {self.sigma:.4g} {unit} ({self.sigma_source})")
         if self.noise is not None:
             lines.append(f"    noise              = {self.noise['text']}")
         g = self.goodness

@@ -116,6 +116,53 @@ def missed_bounces(times: np.ndarray, keep: np.ndarray) -> list[dict]:
     return out
 
 
+@dataclasses.dataclass(frozen=True)
+class RatioResiduals:
+    """Impact onsets under bounce-to-bounce scatter of the restitution: residuals that are
+    independent, from the onset residuals r (in units of `sigma`, s) and their Jacobian.
+
+    A ball's speed is a multiplicative random walk (v_k = v_0 Π e_i), so with scattered
+    e_i the onset residuals accumulate twice and the intervals once; the log ratios of
+    successive flights, log(T_k/T_{k−1}) ≈ log e_k, are independent. The rows (over the
+    `keep` rows, in order) are:
+
+    - the first onset: (p_0 − t_0)/T_1 (relative to the first interval);
+    - the first interval: log(P_1/T_1);
+    - every later interval: log(P_k/T_k) − log(P_{k−1}/T_{k−1}), the scatter of log e_k,
+
+    with t the observed and p the predicted onsets, T and P their intervals; rows not
+    kept are zero (they carry no weight). All rows are dimensionless, on the scale of the
+    relative bounce-to-bounce variation δe/e.
+    """
+
+    times: np.ndarray
+    keep: np.ndarray
+    sigma: float
+
+    def __call__(self, r: np.ndarray, jac: np.ndarray):
+        idx = np.flatnonzero(self.keep)
+        t = self.times
+        pred = t + r * self.sigma
+        dpred = jac * self.sigma
+        out, dout = np.zeros_like(r), np.zeros_like(jac)
+        if idx.size < 2:
+            return out, dout
+        i0, i1 = idx[0], idx[1]
+        out[i0] = (pred[i0] - t[i0]) / (t[i1] - t[i0])
+        dout[i0] = dpred[i0] / (t[i1] - t[i0])
+        prev_log, prev_grad = None, None
+        for a, b in zip(idx[:-1], idx[1:], strict=True):
+            p_int = max(pred[b] - pred[a], 1e-12)
+            log_ratio = math.log(p_int / (t[b] - t[a]))
+            grad = (dpred[b] - dpred[a]) / p_int
+            if prev_log is None:
+                out[b], dout[b] = log_ratio, grad
+            else:
+                out[b], dout[b] = log_ratio - prev_log, grad - prev_grad
+            prev_log, prev_grad = log_ratio, grad
+        return out, dout
+
+
 def noise_statement(d_observe: str, sigma_known: bool, stated, scatter: float, goodness: dict, times) -> dict:
     """The stated σ against the residual scatter, in words and numbers.
 
@@ -160,6 +207,38 @@ def noise_statement(d_observe: str, sigma_known: bool, stated, scatter: float, g
     return {"stated": stated, "scatter": scatter, "unit": unit, "verdict": verdict, "text": text}
 
 
+def scatter_statement(sigma_known: bool, stated: float, onset_scatter: float, variation: float) -> dict:
+    """The statement of a fit under the restitution-scatter error model.
+
+    `variation` is the fitted scale of the log-ratio rows: the bounce-to-bounce relative
+    variation of e, δe/e. Beyond `MAX_E_VARIATION` the verdict is `"misfit"`.
+    """
+    head = (
+        f"onset residual scatter {onset_scatter * 1e3:.3g} ms against a stated {stated * 1e3:.3g} ms"
+        if sigma_known
+        else f"no timing noise stated; onset residual scatter {onset_scatter * 1e3:.3g} ms"
+    )
+    if variation > MAX_E_VARIATION:
+        return {
+            "stated": stated if sigma_known else None,
+            "scatter": onset_scatter,
+            "restitution_scatter": variation,
+            "unit": "s",
+            "verdict": "misfit",
+            "text": f"{head}: a bounce-to-bounce variation of e of {variation:.2%}, more than a ball "
+            "does: the model does not fit",
+        }
+    return {
+        "stated": stated if sigma_known else None,
+        "scatter": onset_scatter,
+        "restitution_scatter": variation,
+        "unit": "s",
+        "verdict": "understated" if sigma_known else "estimated",
+        "text": f"{head}: the bounce-to-bounce variation of e is about {variation:.2%}; fitted as such "
+        "(log ratios of successive flights), the intervals use it",
+    }
+
+
 def _overstated(goodness: dict) -> bool:
     """Reduced χ² so small that the chance of it under the stated σ is below 1e-3."""
     p = goodness["p_value"]
@@ -167,21 +246,30 @@ def _overstated(goodness: dict) -> bool:
 
 
 def holdout_summary(
-    residuals: np.ndarray, rows: Rows, sigma: np.ndarray, fraction: float, unit: str, variance: np.ndarray
+    residuals: np.ndarray,
+    rows: Rows,
+    sigma: np.ndarray,
+    fraction: float,
+    unit: str,
+    variance: np.ndarray,
+    *,
+    reported: np.ndarray | None = None,
 ) -> dict:
-    """The held-out rows' prediction errors (data units) and whether they are within the noise.
+    """The held-out rows' prediction errors and whether they are within the noise.
 
-    `variance` is each row's predictive variance in units of its σ² (1 + JΣJᵀ: the noise
-    plus the fitted parameters' uncertainty propagated to that row). Rows beyond
-    `THRESHOLD` predictive sd are outliers there too and are counted, not averaged. The
-    prediction is *within the noise* when the χ² of the rest against their predictive
-    variance passes the test at p ≥ 1e-3.
+    `residuals` are the fitted rows' residuals (in units of `sigma`'s), `variance` each
+    row's predictive variance in units of its σ² (1 + JΣJᵀ: the noise plus the fitted
+    parameters' uncertainty propagated to that row), `reported` the prediction errors
+    in data units (default: `residuals`). Rows beyond `THRESHOLD` predictive sd are
+    outliers there too and are counted, not averaged. The prediction is *within the
+    noise* when the χ² of the rest against their predictive variance passes the test
+    at p ≥ 1e-3.
     """
     held = rows.holdout
-    errs = residuals[held]
-    scaled = errs / (sigma[held] * np.sqrt(variance[held]))
+    reported = residuals if reported is None else reported
+    scaled = residuals[held] / (sigma[held] * np.sqrt(variance[held]))
     inlier = np.abs(scaled) <= THRESHOLD
-    use = errs[inlier]
+    use = reported[held][inlier]
     if use.size == 0:
         return {"fraction": fraction, "rows": int(held.sum()), "rms": None, "max": None, "within_noise": None}
     g = goodness_of_fit(float(np.sum(scaled[inlier] ** 2)), int(use.size), 0, sigma_known=True)
@@ -191,7 +279,6 @@ def holdout_summary(
         "outliers": int((~inlier).sum()),
         "rms": float(np.sqrt(np.mean(use**2))),
         "max": float(np.max(np.abs(use))),
-        "predicted_sd": float(np.sqrt(np.mean((sigma[held] ** 2 * variance[held])[inlier]))),
         "unit": unit,
         "p_value": g["p_value"],
         "within_noise": bool(g["consistent"]),

@@ -19,7 +19,7 @@ from ._joint import contact_time_of
 from ._kelvin_voigt import restitution_and_contact_time
 from ._problem import PARAMETERS
 from ._result import FitResult
-from ._robust import missed_bounces, noise_statement
+from ._robust import missed_bounces, noise_statement, scatter_statement
 from ._uncertainty import covariance, goodness_of_fit, summarize
 
 
@@ -115,29 +115,41 @@ def _file_entries(setup, z, cov, rows, r_data, sigma_used, best_alone):
     return out
 
 
-def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale) -> FitResult:
-    """The `FitResult` of a finished fit (honest noise, per-file tables, hold-out)."""
+def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale, onsets=None) -> FitResult:
+    """The `FitResult` of a finished fit (honest noise, per-file tables, hold-out).
+
+    `onsets` is None when the fitted rows are the onsets (or positions, heights)
+    themselves; under the restitution-scatter error model it is the point's onset
+    residuals, and `best` holds the log-ratio rows that were fitted.
+    """
     from ._fit import alone_restitution  # the per-file refit uses the fit's stages
 
     n = sum(setup.n_rows)
-    r_data, jac = best.r[:n], best.jac[:n]
+    r_fit, jac = best.r[:n], best.jac[:n]
+    r_data = (onsets or best).r[:n]
     keep = rows.fitted
-    chi2 = float(np.sum(r_data[keep] ** 2))
     p = len(setup.free)
-    goodness = goodness_of_fit(chi2, int(keep.sum()), p, sigma_known=setup.sigma_known)
+    chi2_data = float(np.sum(r_data[keep] ** 2))
+    goodness = goodness_of_fit(chi2_data, int(keep.sum()), p, sigma_known=setup.sigma_known)
+    scatter_model = onsets is not None
     understated = setup.sigma_known and goodness["consistent"] is False
-    cov, s2 = covariance(jac[keep], r_data[keep], sigma_known=setup.sigma_known and not understated)
+    estimate = scatter_model or not setup.sigma_known or understated
+    cov, s2 = covariance(jac[keep], r_fit[keep], sigma_known=not estimate)
     z6, cov6, free6 = view(setup, best.z, cov)
     d0 = setup.datasets[0]
     parameters, derived, identifiable, corr, names = summarize(
         z6, cov6, free6, float(d0.mass), rel_halfwidth=opts.rel_halfwidth, derived=law_derived(setup)
     )
-    sigma_used = setup.sigmas * math.sqrt(s2)
-    scatter = float(np.sqrt(chi2 / max(int(keep.sum()) - p, 1))) * float(np.median(setup.sigmas))
-    noise = noise_statement(
-        d0.observe, setup.sigma_known, float(setup.sigmas[0]), scatter if setup.sigma_known else float(sigma_used[0]),
-        goodness, setup.times[0],
-    )  # fmt: skip
+    onset_scatter = math.sqrt(chi2_data / max(int(keep.sum()) - p, 1)) * float(np.median(setup.sigmas))
+    if scatter_model:
+        sigma_used = np.full(len(setup.sigmas), math.sqrt(s2))
+        noise = scatter_statement(setup.sigma_known, float(setup.sigmas[0]), onset_scatter, math.sqrt(s2))
+    else:
+        sigma_used = setup.sigmas * math.sqrt(s2)
+        noise = noise_statement(
+            d0.observe, setup.sigma_known, float(setup.sigmas[0]),
+            onset_scatter if setup.sigma_known else float(sigma_used[0]), goodness, setup.times[0],
+        )  # fmt: skip
     at_bound = [
         "/".join(str(x) for x in setup.layout.names()[j] if x is not None)
         for j in setup.free
@@ -150,7 +162,11 @@ def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale) -> Fi
     alone = alone_restitution(setup, best, rows, opts) if setup.layout.n_files > 1 else None
     holdout = None
     if opts.holdout > 0:
-        holdout = _holdout(setup, rows, r_data, jac, cov, s2, sigma_used, opts.holdout)
+        data_units = r_data * np.concatenate(
+            [np.full(k, s) for k, s in zip(setup.n_rows, setup.sigmas, strict=True)]
+        )
+        holdout = _holdout(setup, rows, r_fit, jac, cov, s2, data_units, opts.holdout, scatter_model)
+    chi2 = float(np.sum(r_fit[keep] ** 2))
     return FitResult(
         data=d0,
         problem=_file_problem(setup, 0),
@@ -165,7 +181,7 @@ def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale) -> Fi
         * np.concatenate([np.full(k, s) for k, s in zip(setup.n_rows, setup.sigmas, strict=True)]),
         chi2=chi2,
         sigma=float(sigma_used[0]),
-        sigma_source="file" if setup.sigma_known and not understated else "residuals",
+        sigma_source="restitution scatter" if scatter_model else "residuals" if estimate else "file",
         goodness=goodness,
         converged=converged,
         message=best.why if not at_bound else f"stopped at a bound: {', '.join(at_bound)}",
@@ -195,19 +211,22 @@ def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale) -> Fi
     )
 
 
-def _holdout(setup, rows, r_data, jac, cov, s2, sigma_used, fraction) -> dict:
-    """Prediction errors of the held-out rows against the noise plus the fit's uncertainty."""
+def _holdout(setup, rows, r_fit, jac, cov, s2, data_units, fraction, scatter_model) -> dict:
+    """The held-out rows: prediction errors in data units, judged against the noise plus
+    the fitted parameters' uncertainty in the rows the fit used (onsets, or log ratios
+    under the restitution-scatter model)."""
     from ._robust import holdout_summary
 
-    per_row = lambda values: np.concatenate(  # noqa: E731
-        [np.full(k, v) for k, v in zip(setup.n_rows, values, strict=True)]
-    )
     finite = np.where(np.isfinite(cov), cov, 0.0)
     variance = 1.0 + np.einsum("ij,jk,ik->i", jac, finite, jac) / s2
     unit = "s" if setup.datasets[0].observe == "impacts" else "m"
-    return holdout_summary(
-        r_data * per_row(setup.sigmas), rows, per_row(sigma_used), fraction, unit, variance
+    sigma = np.sqrt(s2) * (
+        np.ones(len(r_fit))
+        if scatter_model
+        else np.concatenate([np.full(k, v) for k, v in zip(setup.n_rows, setup.sigmas, strict=True)])
     )
+    scale = 1.0 if scatter_model else sigma
+    return holdout_summary(r_fit * scale, rows, sigma, fraction, unit, variance, reported=data_units)
 
 
 def bounce_points(result) -> list[tuple[str, object]]:
