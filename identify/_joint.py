@@ -178,7 +178,7 @@ class JointEvaluator:
         """The steering prior's residuals (log t_c − log t_c,prior)/sd."""
         out = []
         for f, ik, ir in self._prior_pairs():
-            t_c = contact_time_of(self.law, z[ik], z[ir], float(self.masses[f]), self.speed)
+            t_c = contact_time_of(self.law, z[ik], z[ir], float(self.masses[f]), self.speed, floor=True)
             out.append((math.log(max(t_c, 1e-300)) - math.log(CONTACT_TIME_GUESS)) / PRIOR_SD)
         return np.asarray(out)
 
@@ -274,9 +274,13 @@ def _no_jacobian(n: int) -> np.ndarray:
     return np.zeros((n, 0))
 
 
-def contact_time_of(law: str, log_kappa: float, log_k_r: float, mass: float, speed: float) -> float:
+def contact_time_of(
+    law: str, log_kappa: float, log_k_r: float, mass: float, speed: float, *, floor: bool = False
+) -> float:
     """Contact time, s, of the law at (κ, k_r): Kelvin–Voigt's π/ω_d (inf when
-    overdamped); Hunt–Crossley's undamped Hertz time at impact speed `speed` (m/s)."""
+    overdamped, or finite and huge with `floor`: ω_d² ≥ 1e-300, so that the prior's
+    residual and its difference quotient stay finite); Hunt–Crossley's undamped Hertz
+    time at impact speed `speed` (m/s)."""
     kappa, k_r = math.exp(log_kappa), math.exp(log_k_r)
     if law == "hunt-crossley":
         n1 = 2.5
@@ -284,4 +288,6 @@ def contact_time_of(law: str, log_kappa: float, log_k_r: float, mass: float, spe
         integral = math.sqrt(math.pi) * math.gamma(1.0 + 1.0 / n1) / math.gamma(0.5 + 1.0 / n1)
         return 2.0 * dmax / speed * integral
     omega2 = kappa / mass - (k_r / (2 * mass)) ** 2
+    if floor:
+        omega2 = max(omega2, 1e-300)
     return math.pi / math.sqrt(omega2) if omega2 > 0 else math.inf
