@@ -208,41 +208,46 @@ def test_cli_joint_fit_json_and_exit_codes(tmp_path, kv_drops, monkeypatch, caps
 
 
 def test_forward_mode_gradient_stage_matches_central_differences(kv_drops):
-    """The optax stage's Jᵀr by forward mode equals a central difference of ½Σr²."""
-    from identify._fit import _gradient_step, _Options, default_optimizer
+    """The optax stage's gradient Jᵀr, by forward mode through the event mode, equals a
+    central difference of ½Σr² from the (independently compiled) evaluator; read off one
+    plain gradient-descent step (optax.sgd(1): z_new = z − g)."""
+    import dataclasses
+
+    import jax.numpy as jnp
+    import optax
+
+    from identify._fit import _gradient_step, _weights
     from identify._robust import Rows
     from identify._setup import build, start_point
 
     t = kv_drops[0.20][:8] + 0.03
     setup = build([_impacts(t, 0.20)], law="kelvin-voigt", nuisance=("offset",), freeze=(), initial={},
                   bounds={}, tol=1e-10)  # fmt: skip
-    rows = Rows.make(setup.n_rows, 0.0)
-    opts = _Options(("offset",), (), 1, 0, "optax", default_optimizer(), 1, 10, False, 0.25, False, False,
-                    4.0, 0.0, "forward")  # fmt: skip
-    z = start_point(setup, 0.95, 1.1e-3)
-    z[5] = 0.03
     ev = setup.evaluator
     ev.prior = False
+    rows = Rows.make(setup.n_rows, 0.0)
+    z = start_point(setup, 0.96, 1.1e-3)
+    z[5] = 0.0302
+    sgd = optax.sgd(1.0)
+    step = _gradient_step(sgd, "forward")
+    group = ev.groups[0]
+    problem = dataclasses.replace(group.problem, autodiff="forward")
+    w = jnp.asarray(_weights(setup, rows)[None, :])
+    index = jnp.asarray(setup.layout.index[group.files])
+    mask = jnp.asarray([True, True, False, False, False, True])
+    z_new, _, value = step([problem], [index], [w], jnp.asarray(z), sgd.init(jnp.asarray(z)), mask)
+    gradient = z - np.asarray(z_new)
 
     def cost(zz):
         return 0.5 * float(np.sum(ev(zz)[0] ** 2))
 
-    import jax.numpy as jnp
-
-    from identify._fit import _weights
-
-    step = _gradient_step(opts.optimizer, "forward")
-    g = setup.evaluator.groups[0]
-    w = jnp.asarray(_weights(setup, rows)[None, :])
-    index = jnp.asarray(setup.layout.index[g.files])
-    problem = g.problem
-    import dataclasses
-
-    problem = dataclasses.replace(problem, autodiff="forward")
-    state = opts.optimizer.init(jnp.asarray(z))
-    # One step with a plain SGD-like optimizer would reveal g; read it off the loss instead:
-    _, _, value = step([problem], [index], [w], jnp.asarray(z), state, jnp.ones(6, bool))
     assert float(value) == pytest.approx(cost(z), rel=1e-9)
+    for i, h in ((0, 1e-5), (1, 1e-5), (5, 1e-8)):
+        zp, zm = z.copy(), z.copy()
+        zp[i] += h
+        zm[i] -= h
+        assert gradient[i] == pytest.approx((cost(zp) - cost(zm)) / (2 * h), rel=1e-4)
+    assert np.all(gradient[[2, 3, 4]] == 0.0)
 
 
 @pytest.mark.parametrize(
