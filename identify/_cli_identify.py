@@ -24,7 +24,7 @@ def add_identify(commands) -> None:
         help="fit contact stiffness kappa and damping k_r to rebound data, with uncertainty",
         description="Fit kappa and k_r of the ball model [K90 Eq. 3.1-3.3] to one or several rebound data "
         "files (format: data/README.md; `jaxunilat import` converts recordings) with the event mode; report "
-        "estimates, 95%% CIs, derived e and t_c, correlations, outliers and an identifiability verdict. "
+        "estimates, 95% CIs, derived e and t_c, correlations, outliers and an identifiability verdict. "
         "Several files are fitted jointly: kappa, k_r (and drag) shared, each file its own x0, v0, offset. "
         "Exit status: 0 converged, 3 not converged (the JSON is still written, with converged: false), "
         "2 bad input.",

@@ -47,7 +47,7 @@ def add_import(commands) -> None:
         help="impact onsets from a WAV recording of a bouncing ball",
         description="Detect the impact clicks in a WAV file (PCM 16/24/32-bit or float 32/64-bit, mono or "
         "stereo, 8-96 kHz): coarse detection above THRESHOLD x the robust noise floor with a dead time, then "
-        "the onset refined to the start of each click (where its envelope first exceeds 10%% of its own "
+        "the onset refined to the start of each click (where its envelope first exceeds 10% of its own "
         "peak and 5 noise sigma). Quiet clicks where no bounce can be (the intervals of a ball decay "
         "smoothly) and echoes closer than MIN_GAP to a louder click are rejected and reported. Writes "
         "observe = impacts; noise defaults to the timing-noise estimate (the scatter of the intervals about "

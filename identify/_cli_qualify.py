@@ -11,7 +11,7 @@ def add_qualify(commands) -> None:
         "qualify",
         help="simulate a standard rebound test (default ITTF) and print PASS/FAIL",
         description="Simulate a standard rebound test with the event mode and print the rebound height "
-        "with its 95%% interval and a verdict: PASS (interval inside [min, max]), FAIL (estimate outside) "
+        "with its 95% interval and a verdict: PASS (interval inside [min, max]), FAIL (estimate outside) "
         "or INCONCLUSIVE. Default: the ITTF ball test, a 2.7 g ball dropped from 0.305 m (its lowest "
         "point) onto steel must rebound 0.240-0.260 m. Heights in m. Exit code 0 whatever the verdict.",
     )

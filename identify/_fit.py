@@ -1,30 +1,33 @@
-"""`fit()`: κ and k_r (and optional nuisance parameters) from one data set.
+"""`fit()`: κ and k_r (and nuisance parameters) from one or several data sets.
 
-The pipeline (SPEC §5):
+The stages (design notes with the measured reasons: `identify/README.md`):
 
-1. **Closed-form start.** e from successive rebound heights or flight times
-   (`identify._initial`), t_c from the 0.5–2 ms prior, then (κ, k_r) from the
-   Kelvin–Voigt inverse. Two-racket traces, which have no closed form, start from the
-   best e on a grid.
-2. **Multi-start.** The first start is the closed form; the others spread t_c over
-   the prior (log-uniform) and jitter e by 2%.
+1. **Set-up** (`identify._setup`): the joint vector (κ, k_r, drag shared; x0, v0,
+   offset per file), one batched evaluator per group of files of one structure.
+2. **Closed-form start**: e from successive rebound heights or drag-corrected flight
+   times (`identify._initial`), t_c from the 0.5–2 ms prior, then (κ, k_r) from the
+   law's inverse. Two-racket traces, which have no closed form, start from the best e
+   on a grid. Further starts spread t_c over the prior and jitter e by 2%.
 3. **Optional gradient stage** (`method="optax"`): the `optax.GradientTransformation`
-   passed in (default `default_optimizer()`) minimizes ½Σr² with reverse-mode
-   gradients through the event mode (correct through impacts), one jitted step per
-   iteration.
-4. **Levenberg–Marquardt** on z = (log κ, log k_r, …) with Marquardt scaling, bounds
-   by projection and frozen parameters. Long traces are fitted on growing windows
-   (the first 35%, 65%, then all of the trace): Adam or LM on a raw 2 s trace from a
-   2× wrong start goes out of phase (SPEC §5), while a window that holds the first
-   bounces pins the phase and each longer window starts next to its optimum.
+   passed in (default `default_optimizer()`) minimizes ½Σr² with forward-mode (or
+   reverse-mode) derivatives through the event mode, one jitted step per iteration.
+4. **Levenberg–Marquardt** on z = (log κ, log k_r, …) with Marquardt scaling, bounds by
+   projection and frozen parameters, on growing windows of each file (the first 35%,
+   65%, then all of its span): a window that holds the first bounces pins the phase and
+   each longer window starts next to its optimum.
+5. **Robust pass** (`identify._robust`): Cauchy-weighted LM rounds, then rows beyond the
+   outlier threshold are excluded and listed.
+6. **Final pass**: least squares on the kept rows; impact onsets whose scatter no
+   stated timing noise explains are refitted under the restitution-scatter error model
+   (log ratios of successive flights).
+7. **Summary** (`identify._summary`): Gauss–Newton covariance with honest noise,
+   per-file tables, the per-file "alone" restitution, the hold-out prediction.
 
-The Jacobian's columns are central differences of the event-located solution (step
-1e-4 in log κ, log k_r, log k; scaled steps for x0, v0), one compiled map over the
-2p + 1 runs; the time offset of impact data only shifts the predictions, so its column
-is 1/σ in closed form and takes no runs. The event mode has no forward-mode AD, and its reverse mode would
-need one backward pass per residual (2500 for a 2.5 s, 1 kHz trace): central
-differences of runs whose events are located to machine precision are accurate to
-about 1e-6 relative here, and cost 2p + 1 forward runs.
+The Jacobian's columns are central differences of event-located runs (step 1e-4 in
+log κ, log k_r, log k; scaled steps for x0, v0) inside the one compiled call; the time
+offset of impact data only shifts the predictions, so its column is 1/σ in closed form
+and takes no runs. Forward-mode AD through the event mode is exact too, but compiles
+for several times longer than the whole differenced fit takes (design notes).
 """
 
 from __future__ import annotations
