@@ -6,7 +6,6 @@ Light to import: everything heavy is imported inside the handlers.
 from __future__ import annotations
 
 import math
-import os
 import sys
 import time
 import warnings
@@ -246,13 +245,10 @@ def add_reproduce(commands) -> None:
 
 
 def _run_reproduce(args) -> int:
-    from ._reproduce import reproduce
+    from ._io import check_output_dir
+    from ._reproduce import FIGURES, SUMMARY, reproduce
 
-    parent = os.path.dirname(os.path.abspath(args.out))
-    if not os.path.isdir(parent):
-        raise ValueError(f"--out {args.out!r}: the directory {parent!r} does not exist")
-    if os.path.exists(args.out) and not os.path.isdir(args.out):
-        raise ValueError(f"--out {args.out!r} is a file; give a directory")
+    check_output_dir("--out", args.out, (*FIGURES, SUMMARY), parent_must_exist=True)
     try:
         report = reproduce(args.out, quick=args.quick, log=print)
     except OSError as err:
