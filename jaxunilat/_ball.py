@@ -8,7 +8,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike
 
-from ._contact import AbstractContactLaw, KelvinVoigt
+from ._contact import AbstractContactLaw, ClampedKelvinVoigt, KelvinVoigt, rk4_step_limit
 from ._flight import apex_rise, apex_time, fall_time, flight_state, longest_fall, rise_time
 from ._heaviside import AbstractHeaviside, Exact
 from ._model import AbstractModel
@@ -115,6 +115,14 @@ class Ball(AbstractModel):
         kwargs = dict(kappa=kappa, k_r=k_r)
         kwargs.update(overrides)
         return cls(**kwargs)
+
+    def rk4_step_limit(self, xp=jnp):
+        """The largest RK4 step, s, and the contact time, s: a tenth of the Kelvin–Voigt
+        contact time t_c = π/ω_d of κ, k_r and m (see `jaxunilat._contact.rk4_step_limit`).
+        `None` without walls, and for `HuntCrossley` (its stiffness depends on depth)."""
+        if self.num_switches == 0 or not isinstance(self.law, (KelvinVoigt, ClampedKelvinVoigt)):
+            return None
+        return rk4_step_limit(self.kappa, self.k_r, self.mass, xp)
 
     # -- physics ------------------------------------------------------------------
 

@@ -86,15 +86,6 @@ def _run_simulate_coupling(args) -> int:
         raise ValueError(f"samples = {args.samples!r} is out of range; valid range is integers >= 2")
     model = _build_coupling(args.example, args.params, args.reading, args.h)
     check_output_paths(("--out", args.out), ("--plot", args.plot))
-    if args.solver == "rk4":
-        check_range("dt", args.dt, lo=0.0, lo_open=True, unit="s")
-        # Classic RK4 is stable for an undamped oscillator while ω·dt < 2.78 (ω_c: contact frequency).
-        w_c = math.sqrt(float(model.kappa) * float(model.length) / float(model.j_t))
-        if args.dt * w_c >= 2.78:
-            raise ValueError(
-                f"dt = {args.dt:g} s is beyond RK4's stability limit 2.78/omega_c = {2.78 / w_c:.3g} s for "
-                f"this contact (omega_c = sqrt(kappa*l/J) = {w_c:.4g} rad/s); decrease --dt or use --solver event"
-            )
     # The event mode's budgets are those of `reproduce` and the tests (one compilation) up to 10 s.
     max_steps = 400_000 if args.solver != "event" else 32_768 * math.ceil(args.t1 / 10.0)
     start = time.perf_counter()

@@ -37,7 +37,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array
 
-from ._contact import AbstractContactLaw, KelvinVoigt
+from ._contact import AbstractContactLaw, ClampedKelvinVoigt, KelvinVoigt, rk4_step_limit
 from ._heaviside import AbstractHeaviside, Exact
 from ._model import AbstractModel
 from ._validate import check_choice, check_range
@@ -243,6 +243,16 @@ class Coupling(AbstractModel):
     def phi(self, t) -> Array:
         """φ(t) = b[c t − (1 − e^(−at))/a], rad, with φ(0) = 0."""
         return self.b * (self.c * t + jnp.expm1(-self.a * t) / self.a)
+
+    def rk4_step_limit(self, xp=jnp):
+        """The largest RK4 step, s, and the joint's contact time, s: a tenth of the
+        Kelvin–Voigt contact time of κ, the damping k_r + h and the contact mass J_t/l
+        (see `jaxunilat._contact.rk4_step_limit`). `None` for `HuntCrossley`."""
+        if not isinstance(self.law, (KelvinVoigt, ClampedKelvinVoigt)):
+            return None
+        damping = [d for d in (self.k_r, self.h) if d is not None]
+        k_r = None if not damping else sum(damping[1:], damping[0])
+        return rk4_step_limit(self.kappa, k_r, self.j_t / self.length, xp)
 
     # -- physics ------------------------------------------------------------------
 

@@ -6,6 +6,7 @@ import abc
 from typing import ClassVar
 
 import equinox as eqx
+import jax.numpy as jnp
 from jaxtyping import Array
 
 
@@ -27,3 +28,10 @@ class AbstractModel(eqx.Module):
     @abc.abstractmethod
     def output(self, name: str, t: Array, y: Array) -> Array:
         """One named output (see `output_names`) at time t and state y."""
+
+    def rk4_step_limit(self, xp=jnp) -> tuple[Array, Array] | None:
+        """The largest step `simulate(solver="rk4")` accepts, s, and the contact time
+        it derives from, s (see `jaxunilat._contact.rk4_step_limit`); `None` where the
+        model has no known limit. `xp`: `jax.numpy`, or `numpy` for concrete values."""
+        del xp
+        return None

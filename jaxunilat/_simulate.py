@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import enum
+import math
 import re
 from collections import Counter
 
@@ -14,6 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
 
+from ._contact import RK4_STEPS_PER_CONTACT
 from ._device_cache import DeviceCache
 from ._event import EventRecord, event_solve
 from ._heaviside import Exact
@@ -39,6 +41,9 @@ class Status(enum.IntEnum):
     NONFINITE = 2
     SOLVER_FAILED = 3
     EVENT_OVERFLOW = 4
+    #: A traced input out of its valid range (concrete ones raise `ValueError` before
+    #: the solve): the outputs are meaningless. With `throw=True` the error names it.
+    INVALID_INPUT = 5
 
 
 def _messages(settings: SolverSettings) -> list[str]:
@@ -107,11 +112,36 @@ _FORWARD_ONLY = (
 )
 
 
-def _finish(ys, y1, status, settings, throw, ts, stats, events=None):
+def _input_checks(model, settings: SolverSettings) -> list[tuple[str, Array]]:
+    """(message, valid) per run-time check of a solve's inputs, in the order they are
+    reported: what `simulate` checks on concrete values before compiling, for traced
+    ones. Each `valid` is a scalar bool (per row under `jax.vmap`)."""
+    checks = []
+    if settings.method == "rk4":
+        limit = model.rk4_step_limit(jnp)
+        if limit is not None:
+            checks.append(
+                (
+                    "jaxunilat.simulate: dt is beyond rk4's stability limit for this contact, a tenth "
+                    "of the contact time t_c = pi/omega_d (the traced dt or parameters); decrease dt, "
+                    "or use solver='tsit5' or solver='event'.",
+                    jnp.all(settings.dt <= limit[0]),
+                )
+            )
+    return checks
+
+
+def _finish(ys, y1, status, settings, throw, ts, stats, events=None, checks=()):
+    messages = _messages(settings)
+    reason = jnp.maximum(status - 1, 0)
+    if checks:
+        valid = jnp.stack([ok for _, ok in checks])
+        # The first failed check, reported instead of whatever the solve did with it.
+        reason = jnp.where(jnp.all(valid), reason, len(messages) + jnp.argmin(valid))
+        status = jnp.where(jnp.all(valid), status, Status.INVALID_INPUT).astype(jnp.int32)
+        messages = messages + [message for message, _ in checks]
     if throw:
-        ys = eqx.branched_error_if(
-            ys, status != Status.SUCCESS, jnp.maximum(status - 1, 0), _messages(settings)
-        )
+        ys = eqx.branched_error_if(ys, status != Status.SUCCESS, reason, messages)
     if settings.autodiff == "forward":
         # A clear error instead of JAX's about transposing a while loop.
         ys, y1, events = eqxi.nondifferentiable_backward((ys, y1, events), msg=_FORWARD_ONLY)
@@ -129,6 +159,7 @@ def _finish(ys, y1, status, settings, throw, ts, stats, events=None):
 
 def _solve_impl(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[str, ...], throw: bool):
     _TRACES["simulate"] += 1
+    checks = _input_checks(model, settings)
     if settings.method == "event":
         ys, y1, done, nonfinite, overflow, stats, events = event_solve(
             model, y0, t0, t1, ts, settings, outputs
@@ -139,7 +170,7 @@ def _solve_impl(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[
             Status.NONFINITE,
             jnp.where(overflow, Status.EVENT_OVERFLOW, jnp.where(done, Status.SUCCESS, Status.MAX_STEPS)),
         ).astype(jnp.int32)
-        return _finish(ys, y1, status, settings, throw, ts, stats, events)
+        return _finish(ys, y1, status, settings, throw, ts, stats, events, checks)
 
     def save_fn(t, y, args):
         return {name: args.output(name, t, y) for name in outputs}
@@ -170,7 +201,7 @@ def _solve_impl(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[
         jnp.where(finite, Status.SUCCESS, Status.NONFINITE),
         jnp.where(steps, Status.MAX_STEPS, jnp.where(finite, Status.SOLVER_FAILED, Status.NONFINITE)),
     ).astype(jnp.int32)
-    return _finish(ys, y1, status, settings, throw, ts, sol.stats)
+    return _finish(ys, y1, status, settings, throw, ts, sol.stats, checks=checks)
 
 
 #: The compiled solve. Plain `jax.jit` (every leaf of a model or of the settings is an
@@ -346,4 +377,33 @@ def simulate(
         flight=flight,
         autodiff=autodiff,
     )
+    if solver == "rk4":
+        _check_rk4_step(model, dt)
     return _run(model, y0, t0, t1, ts, settings, outputs, bool(throw))
+
+
+def _is_concrete_tree(tree) -> bool:
+    return all(is_concrete(leaf) for leaf in jax.tree_util.tree_leaves(tree))
+
+
+def _check_rk4_step(model, dt) -> None:
+    """Raise `ValueError` when a concrete RK4 step `dt` exceeds the model's limit
+    (traced values are checked at run time: `Status.INVALID_INPUT`)."""
+    if not (is_concrete(dt) and _is_concrete_tree(model)):
+        return
+    # On the host: NumPy copies of the leaves (no device dispatch per operation).
+    found = jax.tree_util.tree_map(np.asarray, model).rk4_step_limit(np)
+    if found is None:
+        return
+    limit, t_c = (float(v) for v in found)
+    step = float(np.max(np.asarray(dt)))
+    if not step > limit:
+        return
+    if math.isfinite(t_c) and limit == t_c / RK4_STEPS_PER_CONTACT:
+        why = f"a tenth of the contact time t_c = pi/omega_d = {t_c:.3g} s"
+    else:
+        why = "the time scale 1/|lambda| of the overdamped contact's fastest mode"
+    raise ValueError(
+        f"dt = {step:g} s is beyond rk4's stability limit for this contact; valid range is "
+        f"(0, {limit:.3g}] s ({why}); use dt <= {limit:.3g} s, or solver='tsit5' or solver='event'"
+    )

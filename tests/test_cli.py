@@ -129,11 +129,13 @@ def test_output_path_checks(tmp_path, capsys):
     assert code == 2 and "does not exist" in err
 
 
-def test_unstable_rk4_is_a_clear_runtime_error(tmp_path, capsys):
+@pytest.mark.parametrize("dt", ["5", "1e-3", "3e-3"])
+def test_rk4_beyond_its_step_limit_is_refused(dt, tmp_path, capsys):
+    """Before: exit 0 with x(t1) = -1.2e14 m (dt 5 s), or contacts silently lost (1e-3 s)."""
     csv = tmp_path / "x.csv"
-    code, _, err = _run(["simulate", "ball", "--solver", "rk4", "--dt", "3e-3", "--out", str(csv)], capsys)
-    assert code == 1
-    assert len(err.strip().splitlines()) == 1 and "--dt" in err
+    code, _, err = _run(["simulate", "ball", "--solver", "rk4", "--dt", dt, "--out", str(csv)], capsys)
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1 and f"dt = {float(dt):g} s" in err and "0.000153" in err
     assert not csv.exists()
 
 

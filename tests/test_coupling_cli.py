@@ -41,7 +41,7 @@ def test_simulate_coupling_bad_input(tmp_path, capsys):
     assert main(["simulate", "coupling", "--params", "soft"]) == 2
     assert main(["simulate", "coupling", "--h", "-1"]) == 2
     assert "h = -1" in capsys.readouterr().err
-    # RK4 beyond its stability limit 2.78/omega_c (omega_c = 255 rad/s under the stiff constants).
+    # RK4 beyond its step limit, a tenth of the contact time (1.25 ms under the stiff constants).
     assert main(["simulate", "coupling", "--solver", "rk4", "--dt", "0.02"]) == 2
     assert "stability limit" in capsys.readouterr().err
     assert main(["simulate", "coupling", "--out", str(tmp_path / "missing" / "x.csv")]) == 2
