@@ -55,6 +55,21 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
+def count(text: str) -> int:
+    """An argparse type for counts: an integer, also spelled like `1e4` (integral only)."""
+    try:
+        return int(text)
+    except ValueError:
+        pass
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid count {text!r}; give an integer, e.g. 2001") from None
+    if not (math.isfinite(value) and value == int(value)):
+        raise argparse.ArgumentTypeError(f"invalid count {text!r}; give an integer, e.g. 2001")
+    return int(value)
+
+
 def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
@@ -104,7 +119,7 @@ def _add_simulate_ball(models) -> None:
     out = p.add_argument_group("output")
     out.add_argument(
         "--samples",
-        type=int,
+        type=count,
         default=2001,
         help="uniform output samples on [0, t1], ends included (default 2001)",
     )
@@ -356,12 +371,69 @@ def _fail(message: str, code: int) -> int:
     return code
 
 
+EXIT_INTERRUPTED = 130
+
+
+def _exit_on_interrupt():
+    """Make Ctrl-C end the command at once, also while it waits inside a compilation
+    or a compiled solve (where Python's own handler would only run once that returns,
+    minutes or hours later): the signal wakes a watcher thread, which prints one line
+    and exits with 130. Returns the function that removes the watcher again; a no-op
+    outside the main thread (signals can only be handled there)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+    read_fd, write_fd = os.pipe()
+    os.set_blocking(write_fd, False)
+    try:
+        old_fd = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
+    except ValueError:  # e.g. a Python without signal support here
+        os.close(read_fd)
+        os.close(write_fd)
+        return lambda: None
+    # A Python handler must be set for the wakeup byte to be written; this one does
+    # nothing, so that the main thread does not report the interrupt a second time.
+    old_handler = signal.signal(signal.SIGINT, lambda signum, frame: None)
+
+    def watch():
+        while True:
+            try:
+                data = os.read(read_fd, 1)
+            except OSError:
+                return
+            if not data:  # the write end was closed: the command finished
+                return
+            if data[0] == signal.SIGINT:
+                os.write(2, f"{PROG}: error: interrupted\n".encode())
+                os._exit(EXIT_INTERRUPTED)
+
+    watcher = threading.Thread(target=watch, name="jaxunilat-interrupt", daemon=True)
+    watcher.start()
+
+    def remove():
+        signal.signal(signal.SIGINT, old_handler)
+        signal.set_wakeup_fd(old_fd)
+        os.close(write_fd)
+        watcher.join()
+        os.close(read_fd)
+
+    return remove
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Run the command line with `argv` (default: `sys.argv[1:]`); return the exit code."""
+    """Run the command line with `argv` (default: `sys.argv[1:]`); return the exit code.
+
+    Ctrl-C ends a command at once with one line, `jaxunilat: error: interrupted`, and
+    exit code 130. Output files are written after the computation: an interrupted solve
+    leaves none (an interrupt while one is being written may leave it incomplete).
+    """
     from ._loop_kernels import use_loop_kernels
 
     # Before anything computes: the event mode's loops compile into single kernels.
     use_loop_kernels()
+    remove_watcher = _exit_on_interrupt()
     try:
         args = build_parser().parse_args(argv)
         return int(args.func(args))
@@ -376,4 +448,6 @@ def main(argv: list[str] | None = None) -> int:
         ours = [line for line in text.splitlines() if "jaxunilat" in line]
         return _fail((ours or text.splitlines() or [type(err).__name__])[0], EXIT_RUNTIME)
     except KeyboardInterrupt:
-        return _fail("interrupted", 130)
+        return _fail("interrupted", EXIT_INTERRUPTED)
+    finally:
+        remove_watcher()

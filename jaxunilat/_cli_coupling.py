@@ -10,7 +10,7 @@ import sys
 import time
 import warnings
 
-from ._cli import EXIT_OK, RunError, UsageError
+from ._cli import EXIT_OK, RunError, UsageError, count
 
 COUPLING_HEADER = ("t", "psi_xi", "dpsi_xi", "psi_eta", "dpsi_eta", "T_xi", "T_eta")
 
@@ -50,7 +50,10 @@ def add_simulate_coupling(models) -> None:
     run.add_argument("--atol", type=float, default=1e-12, help="absolute tolerance, rad (default 1e-12)")
     out = p.add_argument_group("output")
     out.add_argument(
-        "--samples", type=int, default=10001, help="uniform samples on [0, t1], ends included (default 10001)"
+        "--samples",
+        type=count,
+        default=10001,
+        help="uniform samples on [0, t1], ends included (default 10001)",
     )
     out.add_argument(
         "--out", metavar="FILE.csv", help="write the samples as CSV with header " + ",".join(COUPLING_HEADER)
@@ -77,6 +80,7 @@ def _run_simulate_coupling(args) -> int:
 
     from ._io import check_output_paths
     from ._simulate import Status, simulate
+    from ._solvers import MAX_STEPS_LIMIT
     from ._validate import check_range
 
     check_range("t1", args.t1, lo=0.0, lo_open=True, unit="s")
@@ -86,8 +90,21 @@ def _run_simulate_coupling(args) -> int:
         raise ValueError(f"samples = {args.samples!r} is out of range; valid range is integers >= 2")
     model = _build_coupling(args.example, args.params, args.reading, args.h)
     check_output_paths(("--out", args.out), ("--plot", args.plot))
-    # The event mode's budgets are those of `reproduce` and the tests (one compilation) up to 10 s.
-    max_steps = 400_000 if args.solver != "event" else 32_768 * math.ceil(args.t1 / 10.0)
+    # The event mode's budgets are those of `reproduce` and the tests (one compilation) up to
+    # 10 s, and grow with t1; RK4's covers t1/dt (one compilation up to 400 000 steps).
+    blocks = math.ceil(args.t1 / 10.0)
+    if args.solver == "event":
+        if 32_768 * blocks > MAX_STEPS_LIMIT:
+            raise ValueError(
+                f"t1 = {args.t1:g} s is out of range for --solver event; valid range is "
+                f"(0, {10 * (MAX_STEPS_LIMIT // 32_768)}] s (a budget of 32768 steps per 10 s, "
+                f"at most {MAX_STEPS_LIMIT:.0e} steps)"
+            )
+        max_steps = 32_768 * blocks
+    elif args.solver == "rk4":
+        max_steps = max(400_000, math.ceil(args.t1 / args.dt) + 16) if args.dt > 0 else 400_000
+    else:
+        max_steps = 400_000
     start = time.perf_counter()
     sol = simulate(
         model,
@@ -100,7 +117,7 @@ def _run_simulate_coupling(args) -> int:
         samples=args.samples,
         outputs=COUPLING_HEADER[1:],
         max_steps=max_steps,
-        max_events=4096 * math.ceil(args.t1 / 10.0),
+        max_events=4096 * blocks,
         # throw=True as in `reproduce`, so that both share one compilation; main() reports
         # the solver's one-line message (exit 1).
         throw=args.solver != "rk4",

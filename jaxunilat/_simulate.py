@@ -17,12 +17,16 @@ from jaxtyping import Array, ArrayLike
 
 from ._contact import RK4_STEPS_PER_CONTACT
 from ._device_cache import DeviceCache
-from ._event import EventRecord, event_solve
+from ._event import _EV as _EVENT_COLUMNS, EventRecord, event_solve
 from ._heaviside import Exact
 from ._model import AbstractModel
 from ._solvers import SolverSettings, make_settings
 from ._validate import as_float_array, check_choice, check_range, is_concrete
 
+#: The most memory `simulate` lets one run's save times and outputs (or the event
+#: mode's event buffer) take, bytes: beyond it, a ValueError names `samples` or
+#: `max_events` before anything is allocated.
+MAX_OUTPUT_BYTES = 4 * 2**30
 #: How many times each jitted function was traced (compiled). Tests and the
 #: benchmark read it to prove that new parameter values do not retrace.
 _TRACES: Counter = Counter()
@@ -344,6 +348,13 @@ def simulate(
     if ts is None:
         if not isinstance(samples, (int, np.integer)) or samples < 2:
             raise ValueError(f"samples = {samples!r} is out of range; valid range is integers >= 2")
+        most = MAX_OUTPUT_BYTES // (8 * (len(outputs) + 1))
+        if samples > most:
+            raise ValueError(
+                f"samples = {samples!r} is out of range: the save times and {len(outputs)} outputs would "
+                f"take {8 * samples * (len(outputs) + 1) / 2**30:.3g} GiB; valid range is integers 2 to "
+                f"{most} (at most {MAX_OUTPUT_BYTES / 2**30:g} GiB)"
+            )
         t0, t1, ts = _default_times(t0, t1, int(samples))
     else:
         ts = as_float_array(ts)
@@ -364,6 +375,14 @@ def simulate(
         # Module, which costs more than the check itself (this runs on every call).
         if not hasattr(type(model), "switches"):
             raise ValueError(f"solver = 'event' is not supported for {type(model).__name__}")
+    if solver == "event" and isinstance(max_events, (int, np.integer)):
+        per_event = 8 * (_EVENT_COLUMNS + len(model.state_names))
+        if max_events > MAX_OUTPUT_BYTES // per_event:
+            raise ValueError(
+                f"max_events = {max_events!r} is out of range: the event buffer would take "
+                f"{max_events * per_event / 2**30:.3g} GiB; valid range is integers 1 to "
+                f"{MAX_OUTPUT_BYTES // per_event} (at most {MAX_OUTPUT_BYTES / 2**30:g} GiB)"
+            )
     settings = make_settings(
         solver,
         span,

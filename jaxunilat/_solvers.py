@@ -45,6 +45,10 @@ class RK4(dfx.AbstractERK):
 
 
 SOLVERS = ("rk4", "tsit5", "event")
+#: The largest step budget a solve may have: RK4 takes about 0.1 µs per step on a CPU
+#: core with loop kernels (seconds for 1e8 steps), the event mode ~1 µs; a larger budget
+#: is more likely a units slip (dt in ms, t1 in ms) than a run anyone waits for.
+MAX_STEPS_LIMIT = 100_000_000
 #: The automatic differentiation modes a solve supports (`SolverSettings.autodiff`).
 AUTODIFF = ("reverse", "forward")
 
@@ -159,9 +163,20 @@ def _build_settings(
     check_range("rtol", rtol, lo=0.0, hi=1.0, lo_open=True)
     check_range("atol", atol, lo=0.0, lo_open=True)
     check_range("dt", dt, lo=0.0, lo_open=True, unit="s", allow_none=method != "rk4")
+    if method == "rk4" and is_concrete(dt) and is_concrete(span):
+        step = float(np.min(np.asarray(dt)))
+        needed = float(span) / step
+        if needed > MAX_STEPS_LIMIT:
+            raise ValueError(
+                f"dt = {step:g} s needs (t1 - t0)/dt = {needed:.3g} rk4 steps, more than "
+                f"{MAX_STEPS_LIMIT:.0e}; valid range for this time span is dt >= "
+                f"{float(span) / MAX_STEPS_LIMIT:.3g} s (or shorten the span, or use solver='tsit5' or 'event')"
+            )
     if max_steps is not None:
-        if not isinstance(max_steps, (int, np.integer)) or max_steps < 1:
-            raise ValueError(f"max_steps = {max_steps!r} is out of range; valid range is integers >= 1")
+        if not isinstance(max_steps, (int, np.integer)) or not 1 <= max_steps <= MAX_STEPS_LIMIT:
+            raise ValueError(
+                f"max_steps = {max_steps!r} is out of range; valid range is integers >= 1 and <= {MAX_STEPS_LIMIT:.0e}"
+            )
         max_steps = int(max_steps)
     elif method == "rk4":
         if not (is_concrete(dt) and is_concrete(span)):

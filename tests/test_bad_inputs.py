@@ -81,6 +81,15 @@ API = [
     ("ts unsorted", lambda: _sim(ts=[0.05, 0.01]), ["ts", "sorted"]),
     ("ts beyond t1", lambda: _sim(ts=[0.0, 0.5]), ["ts", "[0, 0.1]"]),
     ("not a model", lambda: ju.simulate("ball", Y0, 1.0), ["model", "'ball'"]),
+    # Work and memory estimated before compiling: hours of RK4 steps, outputs of many GiB.
+    (
+        "rk4 steps 2e11",
+        lambda: _sim(solver="rk4", dt=1e-11, t1=2.0),
+        ["dt = 1e-11", "2e+11", "dt >= 2e-08 s"],
+    ),
+    ("samples 1e10", lambda: _sim(samples=10**10), ["samples = 10000000000", "GiB", "2 to 268435456"]),
+    ("max_events 1e9", lambda: _sim(solver="event", max_events=10**9), ["max_events = 1000000000", "GiB"]),
+    ("max_steps 1e9", lambda: _sim(max_steps=10**9), ["max_steps = 1000000000", "<= 1e+08"]),
 ]
 
 
@@ -153,6 +162,13 @@ CLI = [
     (["simulate", "ball", "--k-r", "-0.2"], "k_r = -0.2"),
     (["simulate", "ball", "--v0", "inf"], "v0 = inf"),
     (["simulate", "ball", "--solver", "kvaerno5"], "kvaerno5"),
+    (["simulate", "ball", "--solver", "rk4", "--dt", "1e-11", "--t1", "2"], "dt >= 2e-08 s"),
+    (["simulate", "ball", "--samples", "10000000000"], "samples = 10000000000"),
+    (["simulate", "ball", "--samples", "1e10"], "samples = 10000000000"),
+    (["simulate", "ball", "--samples", "2.5"], "invalid count '2.5'"),
+    (["simulate", "coupling", "--t1", "1e6"], "t1 = 1e+06 s is out of range for --solver event"),
+    (["simulate", "coupling", "--solver", "rk4", "--dt", "1e-9", "--t1", "1000"], "dt >= 1e-05 s"),
+    (["simulate", "coupling", "--samples", "1e10"], "samples = 10000000000"),
     (["simulate", "ball", "--events", "{tmp}/e.csv"], "--events needs --solver event"),
     (["simulate", "ball", "--out", "{tmp}/a.csv", "--plot", "{tmp}/a.csv"], "name the same file"),
     (["simulate", "ball", "--out", "{tmp}"], "directory"),

@@ -201,3 +201,41 @@ def test_events_output_path_checks(tmp_path, capsys):
     same = str(tmp_path / "same.csv")
     code, _, err = _run([*base, "--out", same, "--events", same], capsys)
     assert code == 2 and "same file" in err and len(err.strip().splitlines()) == 1
+
+
+_FOREVER = """
+import sys
+import jax, jax.numpy as jnp
+import jaxunilat._simulate as engine
+from jaxunilat._cli import main
+
+def forever(*args, **kwargs):  # a compiled solve that never returns
+    print("solving", flush=True)
+    loop = jax.jit(lambda x: jax.lax.while_loop(lambda c: c >= 0, lambda c: c + 1.0, x))
+    return loop(jnp.float64(0.0)).block_until_ready()
+
+engine.simulate = forever
+sys.exit(main(["simulate", "ball", "--samples", "11"]))
+"""
+
+
+def test_ctrl_c_interrupts_a_compiled_solve():
+    """Ctrl-C inside a compiled computation: one line and exit 130 at once, not a hang
+    until the computation ends (here: never)."""
+    import signal
+    import time
+
+    env = dict(os.environ, MPLBACKEND="Agg")
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _FOREVER], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env
+    )
+    try:
+        assert proc.stdout.readline() == "solving\n"
+        time.sleep(0.5)  # into the compiled loop (an earlier signal ends it the same way)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err
+    ours = [line for line in err.splitlines() if line.startswith("jaxunilat:")]
+    assert ours == ["jaxunilat: error: interrupted"], err
