@@ -12,7 +12,7 @@ from ._contact import AbstractContactLaw, ClampedKelvinVoigt, KelvinVoigt, rk4_s
 from ._flight import apex_rise, apex_time, fall_time, flight_state, longest_fall, rise_time
 from ._heaviside import AbstractHeaviside, Exact
 from ._model import AbstractModel
-from ._validate import check_range
+from ._validate import check_range, runtime_check
 
 #: A closed-form flight whose apex is within this many ulps of the upper wall grazes it
 #: without contact (see `Ball.flight_events`).
@@ -91,16 +91,33 @@ class Ball(AbstractModel):
         "contact",
     )
 
-    def __check_init__(self):
-        check_range("kappa", self.kappa, lo=0.0, lo_open=True, unit="N/m")
-        check_range("k_r", self.k_r, lo=0.0, unit="N*s/m", allow_none=True)
-        check_range("mass", self.mass, lo=0.0, lo_open=True, unit="kg")
-        check_range("gravity", self.gravity, lo=0.0, unit="m/s^2")
-        check_range("drag", self.drag, lo=0.0, unit="s/m", allow_none=True)
-        check_range("lower", self.lower, unit="m", allow_none=True)
-        check_range("upper", self.upper, unit="m", allow_none=True)
+    def _ranges(self):
+        """(name, value, valid range as `check_range` keywords) of each parameter present."""
+        ranges = [
+            ("kappa", self.kappa, dict(lo=0.0, lo_open=True, unit="N/m")),
+            ("k_r", self.k_r, dict(lo=0.0, unit="N*s/m")),
+            ("mass", self.mass, dict(lo=0.0, lo_open=True, unit="kg")),
+            ("gravity", self.gravity, dict(lo=0.0, unit="m/s^2")),
+            ("drag", self.drag, dict(lo=0.0, unit="s/m")),
+            ("lower", self.lower, dict(unit="m")),
+            ("upper", self.upper, dict(unit="m")),
+        ]
         if self.lower is not None and self.upper is not None:
-            check_range("gap (upper - lower)", self.upper - self.lower, lo=0.0, lo_open=True, unit="m")
+            ranges.append(
+                ("gap (upper - lower)", self.upper - self.lower, dict(lo=0.0, lo_open=True, unit="m"))
+            )
+        eps = getattr(self.heaviside, "eps", None)
+        if eps is not None:
+            ranges.append(("eps", eps, dict(lo=0.0, lo_open=True, unit="m")))
+        return [(name, value, kw) for name, value, kw in ranges if value is not None]
+
+    def __check_init__(self):
+        for name, value, kw in self._ranges():
+            check_range(name, value, **kw)
+
+    def runtime_checks(self):
+        """Each parameter's range, checked at run time when it is traced (`simulate`)."""
+        return [runtime_check(name, value, **kw) for name, value, kw in self._ranges()]
 
     @classmethod
     def table1(cls, example: int = 2, **overrides) -> Ball:

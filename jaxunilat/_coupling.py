@@ -40,7 +40,7 @@ from jaxtyping import Array
 from ._contact import AbstractContactLaw, ClampedKelvinVoigt, KelvinVoigt, rk4_step_limit
 from ._heaviside import AbstractHeaviside, Exact
 from ._model import AbstractModel
-from ._validate import check_choice, check_range
+from ._validate import check_choice, check_range, runtime_check
 
 #: The paper's constants [K90 §5.2]: mass (kg), length l (m), diameter d (m), lever l_p (m),
 #: spin-up rate a (1/s), c (dimensionless), gravity (m/s²).
@@ -143,22 +143,37 @@ class Coupling(AbstractModel):
         "contact",
     )
 
+    def _ranges(self):
+        """(name, value, valid range as `check_range` keywords) of each parameter present."""
+        ranges = [
+            ("alpha", self.alpha, {}),
+            ("clearance", self.clearance, dict(lo=0.0, lo_open=True, unit="m")),
+            ("clearance_eta", self.clearance_eta, dict(lo=0.0, lo_open=True, unit="m")),
+            ("b", self.b, dict(unit="1/s")),
+            ("kappa", self.kappa, dict(lo=0.0, lo_open=True, unit="N/rad")),
+            ("k_r", self.k_r, dict(lo=0.0, unit="N*s/rad")),
+            ("h", self.h, dict(lo=0.0, unit="N*s/rad")),
+            ("mass", self.mass, dict(lo=0.0, lo_open=True, unit="kg")),
+            ("length", self.length, dict(lo=0.0, lo_open=True, unit="m")),
+            ("diameter", self.diameter, dict(lo=0.0, lo_open=True, unit="m")),
+            ("lever", self.lever, dict(unit="m")),
+            ("a", self.a, dict(lo=0.0, lo_open=True, unit="1/s")),
+            ("c", self.c, {}),
+            ("gravity", self.gravity, dict(lo=0.0, unit="m/s^2")),
+        ]
+        eps = getattr(self.heaviside, "eps", None)
+        if eps is not None:
+            ranges.append(("eps", eps, dict(lo=0.0, lo_open=True, unit="rad")))
+        return [(name, value, kw) for name, value, kw in ranges if value is not None]
+
     def __check_init__(self):
         check_choice("reading", self.reading, READINGS)
-        check_range("alpha", self.alpha)
-        check_range("clearance", self.clearance, lo=0.0, lo_open=True, unit="m")
-        check_range("clearance_eta", self.clearance_eta, lo=0.0, lo_open=True, unit="m", allow_none=True)
-        check_range("b", self.b, unit="1/s")
-        check_range("kappa", self.kappa, lo=0.0, lo_open=True, unit="N/rad")
-        check_range("k_r", self.k_r, lo=0.0, unit="N*s/rad", allow_none=True)
-        check_range("h", self.h, lo=0.0, unit="N*s/rad", allow_none=True)
-        check_range("mass", self.mass, lo=0.0, lo_open=True, unit="kg")
-        check_range("length", self.length, lo=0.0, lo_open=True, unit="m")
-        check_range("diameter", self.diameter, lo=0.0, lo_open=True, unit="m")
-        check_range("lever", self.lever, unit="m")
-        check_range("a", self.a, lo=0.0, lo_open=True, unit="1/s")
-        check_range("c", self.c)
-        check_range("gravity", self.gravity, lo=0.0, unit="m/s^2")
+        for name, value, kw in self._ranges():
+            check_range(name, value, **kw)
+
+    def runtime_checks(self):
+        """Each parameter's range, checked at run time when it is traced (`simulate`)."""
+        return [runtime_check(name, value, **kw) for name, value, kw in self._ranges()]
 
     @classmethod
     def table2(

@@ -29,6 +29,12 @@ class AbstractModel(eqx.Module):
     def output(self, name: str, t: Array, y: Array) -> Array:
         """One named output (see `output_names`) at time t and state y."""
 
+    def runtime_checks(self) -> list[tuple[str, Array]]:
+        """`(message, valid)` per parameter check, for traced parameters (see
+        `jaxunilat._validate.runtime_check`): what `__check_init__` checks on concrete
+        values, which `simulate` evaluates once before the solve."""
+        return []
+
     def rk4_step_limit(self, xp=jnp) -> tuple[Array, Array] | None:
         """The largest step `simulate(solver="rk4")` accepts, s, and the contact time
         it derives from, s (see `jaxunilat._contact.rk4_step_limit`); `None` where the

@@ -21,7 +21,7 @@ from ._event import _EV as _EVENT_COLUMNS, EventRecord, event_solve
 from ._heaviside import Exact
 from ._model import AbstractModel
 from ._solvers import SolverSettings, make_settings
-from ._validate import as_float_array, check_choice, check_range, is_concrete
+from ._validate import as_float_array, check_choice, check_range, is_concrete, runtime_check
 
 #: The most memory `simulate` lets one run's save times and outputs (or the event
 #: mode's event buffer) take, bytes: beyond it, a ValueError names `samples` or
@@ -116,11 +116,26 @@ _FORWARD_ONLY = (
 )
 
 
-def _input_checks(model, settings: SolverSettings) -> list[tuple[str, Array]]:
+def _input_checks(model, y0, t0, t1, ts, settings: SolverSettings) -> list[tuple[str, Array]]:
     """(message, valid) per run-time check of a solve's inputs, in the order they are
-    reported: what `simulate` checks on concrete values before compiling, for traced
-    ones. Each `valid` is a scalar bool (per row under `jax.vmap`)."""
-    checks = []
+    reported: what `simulate` and the model check on concrete values before compiling,
+    for traced ones (under `jax.jit`, `jax.vmap`, `jax.grad`). Each `valid` is a scalar
+    bool (per row under `jax.vmap`); all are evaluated once, before the solve."""
+    checks = list(model.runtime_checks())
+    checks.append(runtime_check("t0", t0, unit="s"))
+    checks.append(runtime_check("t1 - t0", t1 - t0, lo=0.0, lo_open=True, unit="s"))
+    checks.append(runtime_check("y0", y0))
+    checks.append(
+        (
+            "jaxunilat.simulate: ts must be sorted within [t0, t1] (traced values).",
+            jnp.all(jnp.diff(ts) >= 0) & (ts[0] >= t0) & (ts[-1] <= t1),
+        )
+    )
+    checks.append(runtime_check("rtol", settings.rtol, lo=0.0, hi=1.0, lo_open=True))
+    checks.append(runtime_check("atol", settings.atol, lo=0.0, lo_open=True))
+    for name, value in (("dt", settings.dt), ("dtmax", settings.dtmax)):
+        if value is not None:
+            checks.append(runtime_check(name, value, lo=0.0, lo_open=True, unit="s"))
     if settings.method == "rk4":
         limit = model.rk4_step_limit(jnp)
         if limit is not None:
@@ -163,7 +178,7 @@ def _finish(ys, y1, status, settings, throw, ts, stats, events=None, checks=()):
 
 def _solve_impl(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[str, ...], throw: bool):
     _TRACES["simulate"] += 1
-    checks = _input_checks(model, settings)
+    checks = _input_checks(model, y0, t0, t1, ts, settings)
     if settings.method == "event":
         ys, y1, done, nonfinite, overflow, stats, events = event_solve(
             model, y0, t0, t1, ts, settings, outputs

@@ -45,6 +45,47 @@ def check_finite(name: str, value, *, allow_none: bool = False) -> None:
             raise ValueError(f"{name} = {v} is not finite; it must be a finite number")
 
 
+def _range_text(lo, hi, lo_open, hi_open) -> str:
+    left = "(" if lo_open or lo is None else "["
+    right = ")" if hi_open or hi is None else "]"
+    lo_txt = "-inf" if lo is None else f"{lo:g}"
+    hi_txt = "inf" if hi is None else f"{hi:g}"
+    return f"{left}{lo_txt}, {hi_txt}{right}"
+
+
+def runtime_check(
+    name: str,
+    value,
+    *,
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+    hi_open: bool = False,
+    unit: str = "",
+) -> tuple[str, jax.Array]:
+    """The run-time twin of `check_range` for a traced value: `(message, valid)`.
+
+    `valid` is a scalar bool array, true when every entry of `value` is finite and
+    within the bounds; `message` names `name` and the valid range. `simulate` turns a
+    false `valid` into `Status.INVALID_INPUT` (and, with `throw=True`, an error with
+    `message`).
+    """
+    import jax.numpy as jnp
+
+    v = jnp.asarray(value)
+    ok = jnp.isfinite(v)
+    if lo is not None:
+        ok = ok & ((v > lo) if lo_open else (v >= lo))
+    if hi is not None:
+        ok = ok & ((v < hi) if hi_open else (v <= hi))
+    suffix = f" {unit}" if unit else ""
+    message = (
+        f"jaxunilat.simulate: {name} is out of range (a traced value); valid range is "
+        f"{_range_text(lo, hi, lo_open, hi_open)}{suffix}, finite."
+    )
+    return message, jnp.all(ok)
+
+
 def check_range(
     name: str,
     value,
@@ -69,11 +110,7 @@ def check_range(
     check_finite(name, value, allow_none=allow_none)
     if value is None or not is_concrete(value):
         return
-    left = "(" if lo_open or lo is None else "["
-    right = ")" if hi_open or hi is None else "]"
-    lo_txt = "-inf" if lo is None else f"{lo:g}"
-    hi_txt = "inf" if hi is None else f"{hi:g}"
-    rng = f"{left}{lo_txt}, {hi_txt}{right}"
+    rng = _range_text(lo, hi, lo_open, hi_open)
     suffix = f" {unit}" if unit else ""
     for v in _values(value):
         bad = False
