@@ -2,17 +2,19 @@
 
 from __future__ import annotations
 
+import math
 from typing import ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike
 
 from ._contact import AbstractContactLaw, ClampedKelvinVoigt, KelvinVoigt, rk4_step_limit
 from ._flight import apex_rise, apex_time, fall_time, flight_state, longest_fall, rise_time
 from ._heaviside import AbstractHeaviside, Exact
 from ._model import AbstractModel
-from ._validate import check_range, runtime_check
+from ._validate import check_range, is_concrete, runtime_check
 
 #: A closed-form flight whose apex is within this many ulps of the upper wall grazes it
 #: without contact (see `Ball.flight_events`).
@@ -132,6 +134,37 @@ class Ball(AbstractModel):
         kwargs = dict(kappa=kappa, k_r=k_r)
         kwargs.update(overrides)
         return cls(**kwargs)
+
+    def check_initial_state(self, y0) -> None:
+        """Raise `ValueError` when x0 lies inside a wall: the start must be between the
+        walls, ends included (the paper starts at the lower wall). A start inside a wall
+        by at most 10·m·g/κ (ten static sags: a ball resting in contact, m) plus rounding
+        is allowed. Skipped for traced values."""
+        x0 = y0[0]
+        walls = [w for w in (self.lower, self.upper) if w is not None]
+        if not walls or not all(is_concrete(v) for v in (x0, *walls)):
+            return
+        x = float(np.asarray(x0))
+        lo = -math.inf if self.lower is None else float(np.asarray(self.lower))
+        hi = math.inf if self.upper is None else float(np.asarray(self.upper))
+        if lo <= x <= hi:
+            return
+        depth, wall = (lo - x, "lower") if x < lo else (x - hi, "upper")
+        if all(is_concrete(v) for v in (self.mass, self.gravity, self.kappa)):
+            sag = (
+                float(np.asarray(self.mass)) * float(np.asarray(self.gravity)) / float(np.asarray(self.kappa))
+            )
+        else:
+            sag = 0.0
+        ulps = 64 * np.finfo(float).eps * max(abs(x), *(abs(v) for v in (lo, hi) if math.isfinite(v)))
+        allowed = 10 * sag + ulps
+        if depth <= allowed:
+            return
+        raise ValueError(
+            f"x0 = {x:g} m is out of range; valid range is [{lo:g}, {hi:g}] m, between the walls "
+            f"(it starts {depth:.3g} m inside the {wall} wall; at most 10*m*g/kappa = {10 * sag:.2g} m, "
+            "a ball resting in contact, is allowed)"
+        )
 
     def rk4_step_limit(self, xp=jnp):
         """The largest RK4 step, s, and the contact time, s: a tenth of the Kelvin–Voigt

@@ -157,6 +157,7 @@ def _build_ball(args):
     v0 = -1.0 / PAPER_DRAG if args.v0 is None else args.v0
     check_range("x0", x0, unit="m")
     check_range("v0", v0, unit="m/s")
+    ball.check_initial_state(np.array([x0, v0]))
     return ball, x0, v0
 
 

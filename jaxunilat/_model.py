@@ -35,6 +35,12 @@ class AbstractModel(eqx.Module):
         values, which `simulate` evaluates once before the solve."""
         return []
 
+    def check_initial_state(self, y0) -> None:
+        """Raise `ValueError` naming the component when a concrete initial state is
+        unphysical (e.g. deep inside a wall); traced values are not checked. `simulate`
+        calls it with y0 as a float64 array."""
+        del y0
+
     def rk4_step_limit(self, xp=jnp) -> tuple[Array, Array] | None:
         """The largest step `simulate(solver="rk4")` accepts, s, and the contact time
         it derives from, s (see `jaxunilat._contact.rk4_step_limit`); `None` where the

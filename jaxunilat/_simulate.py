@@ -358,6 +358,8 @@ def simulate(
             f"({', '.join(model.state_names)})"
         )
     check_range("y0", y0)
+    if is_concrete(y0):
+        model.check_initial_state(y0)
     t0, t1 = _time_span(t_span)
     span = t1 - t0  # before the save times put t0 and t1 on the device
     if ts is None:

@@ -81,6 +81,12 @@ API = [
     ("ts unsorted", lambda: _sim(ts=[0.05, 0.01]), ["ts", "sorted"]),
     ("ts beyond t1", lambda: _sim(ts=[0.0, 0.5]), ["ts", "[0, 0.1]"]),
     ("not a model", lambda: ju.simulate("ball", Y0, 1.0), ["model", "'ball'"]),
+    (
+        "x0 inside upper wall",
+        lambda: _sim(y0=[1.0, 0.0]),
+        ["x0 = 1 m", "[-0.4, 0.4] m", "0.6 m inside the upper"],
+    ),
+    ("x0 inside lower wall", lambda: _sim(y0=[-0.41, 0.0]), ["x0 = -0.41 m", "[-0.4, 0.4] m", "lower"]),
     # Work and memory estimated before compiling: hours of RK4 steps, outputs of many GiB.
     (
         "rk4 steps 2e11",
@@ -162,6 +168,8 @@ CLI = [
     (["simulate", "ball", "--k-r", "-0.2"], "k_r = -0.2"),
     (["simulate", "ball", "--v0", "inf"], "v0 = inf"),
     (["simulate", "ball", "--solver", "kvaerno5"], "kvaerno5"),
+    (["simulate", "ball", "--x0", "1"], "x0 = 1 m is out of range; valid range is [-0.4, 0.4] m"),
+    (["simulate", "ball", "--gap", "0.5", "--x0", "-0.3"], "valid range is [-0.25, 0.25] m"),
     (["simulate", "ball", "--solver", "rk4", "--dt", "1e-11", "--t1", "2"], "dt >= 2e-08 s"),
     (["simulate", "ball", "--samples", "10000000000"], "samples = 10000000000"),
     (["simulate", "ball", "--samples", "1e10"], "samples = 10000000000"),
@@ -261,3 +269,16 @@ def test_good_inputs_are_never_modified(tmp_path, capsys):
     capsys.readouterr()
     assert _digest(data) == before
     assert _digest(fit) == fit_before
+
+
+def test_start_at_a_wall_or_resting_in_contact_is_allowed():
+    """The paper's start (exactly at the lower wall) and a ball resting in contact (sunk by
+    its static sag m g / kappa) pass; one sag-tolerance deeper does not."""
+    ball = _ball()
+    sag = 2.37e-3 * 9.81 / 1e4
+    for x0 in (-0.4, 0.4, 0.0, -0.4 - sag, -0.4 - 9.9 * sag):
+        ball.check_initial_state(np.array([x0, 0.0]))
+    with pytest.raises(ValueError, match="x0 = -0.40023"):
+        ball.check_initial_state(np.array([-0.4 - 100 * sag, 0.0]))
+    # One wall only: anywhere above the floor.
+    ju.Ball.table1(2, upper=None).check_initial_state(np.array([5.0, 0.0]))
