@@ -14,7 +14,7 @@ from ._contact import AbstractContactLaw, ClampedKelvinVoigt, KelvinVoigt, rk4_s
 from ._flight import apex_rise, apex_time, fall_time, flight_state, longest_fall, rise_time
 from ._heaviside import AbstractHeaviside, Exact
 from ._model import AbstractModel
-from ._validate import check_range, is_concrete, runtime_check
+from ._validate import check_range, check_type, float_field, is_concrete, runtime_check
 
 #: A closed-form flight whose apex is within this many ulps of the upper wall grazes it
 #: without contact (see `Ball.flight_events`).
@@ -34,14 +34,6 @@ TABLE1 = {
     4: (5.0e3, 0.2),
     5: (2.0e4, 0.2),
 }
-
-
-def _optional_array(value):
-    return None if value is None else jnp.asarray(value, dtype=float)
-
-
-def _array(value):
-    return jnp.asarray(value, dtype=float)
 
 
 class Ball(AbstractModel):
@@ -73,13 +65,15 @@ class Ball(AbstractModel):
     their values are traced, so changing them does not recompile.
     """
 
-    kappa: Array = eqx.field(converter=_array)
-    k_r: Array | None = eqx.field(converter=_optional_array, default=0.2)
-    mass: Array = eqx.field(converter=_array, default=PAPER_MASS)
-    gravity: Array = eqx.field(converter=_array, default=PAPER_GRAVITY)
-    drag: Array | None = eqx.field(converter=_optional_array, default=PAPER_DRAG)
-    lower: Array | None = eqx.field(converter=_optional_array, default=-PAPER_GAP / 2)
-    upper: Array | None = eqx.field(converter=_optional_array, default=PAPER_GAP / 2)
+    kappa: Array = eqx.field(converter=float_field("kappa", "N/m"))
+    k_r: Array | None = eqx.field(converter=float_field("k_r", "N*s/m", optional=True), default=0.2)
+    mass: Array = eqx.field(converter=float_field("mass", "kg"), default=PAPER_MASS)
+    gravity: Array = eqx.field(converter=float_field("gravity", "m/s^2"), default=PAPER_GRAVITY)
+    drag: Array | None = eqx.field(converter=float_field("drag", "s/m", optional=True), default=PAPER_DRAG)
+    lower: Array | None = eqx.field(
+        converter=float_field("lower", "m", optional=True), default=-PAPER_GAP / 2
+    )
+    upper: Array | None = eqx.field(converter=float_field("upper", "m", optional=True), default=PAPER_GAP / 2)
     heaviside: AbstractHeaviside = Exact()
     law: AbstractContactLaw = KelvinVoigt()
 
@@ -114,6 +108,10 @@ class Ball(AbstractModel):
         return [(name, value, kw) for name, value, kw in ranges if value is not None]
 
     def __check_init__(self):
+        check_type("heaviside", self.heaviside, AbstractHeaviside, "Exact(), Logistic(eps) or Softplus(eps)")
+        check_type(
+            "law", self.law, AbstractContactLaw, "KelvinVoigt(), HuntCrossley(n) or ClampedKelvinVoigt()"
+        )
         for name, value, kw in self._ranges():
             check_range(name, value, **kw)
 
@@ -354,4 +352,4 @@ class Ball(AbstractModel):
 
 def ball_state(x0: ArrayLike, v0: ArrayLike) -> Array:
     """Pack an initial state y0 = (x0 [m], v0 [m/s])."""
-    return jnp.stack([jnp.asarray(x0, dtype=float), jnp.asarray(v0, dtype=float)])
+    return jnp.stack([float_field("x0", "m")(x0), float_field("v0", "m/s")(v0)])

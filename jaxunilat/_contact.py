@@ -29,7 +29,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike
 
 from ._heaviside import AbstractHeaviside, Exact
-from ._validate import check_range
+from ._validate import check_range, real_number
 
 
 class AbstractContactLaw(eqx.Module):
@@ -147,9 +147,15 @@ class HuntCrossley(AbstractContactLaw):
         return jnp.where(inside, kappa * safe**n1 / n1, jnp.zeros_like(pen))
 
 
+def _real(**values) -> tuple[Array, ...]:
+    """The values as JAX arrays, after `real_number` checks that name each one."""
+    return tuple(jnp.asarray(real_number(name, value)) for name, value in values.items())
+
+
 def damping_ratio(kappa: ArrayLike, k_r: ArrayLike, mass: ArrayLike) -> Array:
     """ζ = k_r / (2√(κ m)), dimensionless. κ in N/m, k_r in N·s/m, m in kg."""
-    return jnp.asarray(k_r) / (2.0 * jnp.sqrt(jnp.asarray(kappa) * jnp.asarray(mass)))
+    kappa, k_r, mass = _real(kappa=kappa, k_r=k_r, mass=mass)
+    return k_r / (2.0 * jnp.sqrt(kappa * mass))
 
 
 def restitution(kappa: ArrayLike, k_r: ArrayLike, mass: ArrayLike) -> Array:
@@ -173,7 +179,8 @@ def contact_time(kappa: ArrayLike, k_r: ArrayLike, mass: ArrayLike) -> Array:
     zeta = damping_ratio(kappa, k_r, mass)
     under = zeta < 1
     safe = jnp.where(under, zeta, 0.5)
-    wd = jnp.sqrt(jnp.asarray(kappa) / jnp.asarray(mass)) * jnp.sqrt(1 - safe**2)
+    kappa, mass = _real(kappa=kappa, mass=mass)
+    wd = jnp.sqrt(kappa / mass) * jnp.sqrt(1 - safe**2)
     return jnp.where(under, jnp.pi / wd, jnp.inf)
 
 

@@ -40,7 +40,7 @@ from jaxtyping import Array
 from ._contact import AbstractContactLaw, ClampedKelvinVoigt, KelvinVoigt, rk4_step_limit
 from ._heaviside import AbstractHeaviside, Exact
 from ._model import AbstractModel
-from ._validate import check_choice, check_range, runtime_check
+from ._validate import check_choice, check_range, check_type, float_field, runtime_check
 
 #: The paper's constants [K90 §5.2]: mass (kg), length l (m), diameter d (m), lever l_p (m),
 #: spin-up rate a (1/s), c (dimensionless), gravity (m/s²).
@@ -68,14 +68,6 @@ READINGS = ("paper", "rotating")
 
 #: Which state component each switch watches (ψ_ξ twice, then ψ_η twice), and its side.
 _SWITCH_COORD = (0, 0, 2, 2)
-
-
-def _array(value):
-    return jnp.asarray(value, dtype=float)
-
-
-def _optional_array(value):
-    return None if value is None else jnp.asarray(value, dtype=float)
 
 
 def transverse_inertia(mass, length):
@@ -109,20 +101,22 @@ class Coupling(AbstractModel):
     Parameters are traced leaves: changing their values does not recompile.
     """
 
-    alpha: Array = eqx.field(converter=_array)
-    clearance: Array = eqx.field(converter=_array)
-    b: Array = eqx.field(converter=_array)
-    kappa: Array = eqx.field(converter=_array)
-    k_r: Array | None = eqx.field(converter=_optional_array, default=None)
-    h: Array | None = eqx.field(converter=_optional_array, default=0.0)
-    clearance_eta: Array | None = eqx.field(converter=_optional_array, default=None)
-    mass: Array = eqx.field(converter=_array, default=COUPLING_MASS)
-    length: Array = eqx.field(converter=_array, default=COUPLING_LENGTH)
-    diameter: Array = eqx.field(converter=_array, default=COUPLING_DIAMETER)
-    lever: Array = eqx.field(converter=_array, default=COUPLING_LEVER)
-    a: Array = eqx.field(converter=_array, default=COUPLING_SPINUP)
-    c: Array = eqx.field(converter=_array, default=COUPLING_C)
-    gravity: Array = eqx.field(converter=_array, default=COUPLING_GRAVITY)
+    alpha: Array = eqx.field(converter=float_field("alpha"))
+    clearance: Array = eqx.field(converter=float_field("clearance", "m"))
+    b: Array = eqx.field(converter=float_field("b", "1/s"))
+    kappa: Array = eqx.field(converter=float_field("kappa", "N/rad"))
+    k_r: Array | None = eqx.field(converter=float_field("k_r", "N*s/rad", optional=True), default=None)
+    h: Array | None = eqx.field(converter=float_field("h", "N*s/rad", optional=True), default=0.0)
+    clearance_eta: Array | None = eqx.field(
+        converter=float_field("clearance_eta", "m", optional=True), default=None
+    )
+    mass: Array = eqx.field(converter=float_field("mass", "kg"), default=COUPLING_MASS)
+    length: Array = eqx.field(converter=float_field("length", "m"), default=COUPLING_LENGTH)
+    diameter: Array = eqx.field(converter=float_field("diameter", "m"), default=COUPLING_DIAMETER)
+    lever: Array = eqx.field(converter=float_field("lever", "m"), default=COUPLING_LEVER)
+    a: Array = eqx.field(converter=float_field("a", "1/s"), default=COUPLING_SPINUP)
+    c: Array = eqx.field(converter=float_field("c"), default=COUPLING_C)
+    gravity: Array = eqx.field(converter=float_field("gravity", "m/s^2"), default=COUPLING_GRAVITY)
     reading: str = eqx.field(static=True, default="paper")
     heaviside: AbstractHeaviside = Exact()
     law: AbstractContactLaw = KelvinVoigt()
@@ -168,6 +162,10 @@ class Coupling(AbstractModel):
 
     def __check_init__(self):
         check_choice("reading", self.reading, READINGS)
+        check_type("heaviside", self.heaviside, AbstractHeaviside, "Exact(), Logistic(eps) or Softplus(eps)")
+        check_type(
+            "law", self.law, AbstractContactLaw, "KelvinVoigt(), HuntCrossley(n) or ClampedKelvinVoigt()"
+        )
         for name, value, kw in self._ranges():
             check_range(name, value, **kw)
 

@@ -21,7 +21,15 @@ from ._event import _EV as _EVENT_COLUMNS, EventRecord, event_solve
 from ._heaviside import Exact
 from ._model import AbstractModel
 from ._solvers import SolverSettings, make_settings
-from ._validate import as_float_array, check_choice, check_range, is_concrete, runtime_check
+from ._validate import (
+    InputTypeError,
+    as_float_array,
+    check_choice,
+    check_range,
+    is_concrete,
+    real_number,
+    runtime_check,
+)
 
 #: The most memory `simulate` lets one run's save times and outputs (or the event
 #: mode's event buffer) take, bytes: beyond it, a ValueError names `samples` or
@@ -346,12 +354,17 @@ def simulate(
             "lost; call jax.config.update('jax_enable_x64', True). float32 input arrays are fine: "
             "simulate casts them to float64."
         )
+    if isinstance(outputs, str):
+        raise InputTypeError(
+            f"outputs = {outputs!r} is a string; give a tuple of names from "
+            f"{', '.join(model.output_names)} (one name: outputs=({model.output_names[0]!r},))"
+        )
     outputs = tuple(outputs)
     if not outputs:
         raise ValueError("outputs = () is empty; request at least one of " + ", ".join(model.output_names))
     for name in outputs:
         check_choice("output", name, model.output_names)
-    y0 = as_float_array(y0)
+    y0 = as_float_array(real_number("y0", y0))
     if y0.shape != (len(model.state_names),):
         raise ValueError(
             f"y0 has shape {y0.shape}; expected ({len(model.state_names)},) for the state "
@@ -374,7 +387,7 @@ def simulate(
             )
         t0, t1, ts = _default_times(t0, t1, int(samples))
     else:
-        ts = as_float_array(ts)
+        ts = as_float_array(real_number("ts", ts, unit="s"))
         if ts.ndim != 1 or ts.shape[0] < 1:
             raise ValueError(f"ts has shape {ts.shape}; expected a non-empty 1-D array of times in s")
         if is_concrete(ts) and is_concrete(t0) and is_concrete(t1):

@@ -108,6 +108,41 @@ def test_api_bad_input_names_parameter_value_and_range(label, call, parts):
         assert part in message, (label, message)
 
 
+# (label, callable, substrings): a wrong type raises TypeError (also a ValueError) naming the parameter
+TYPES = [
+    ("kappa text", lambda: ju.Ball(kappa="abc"), ["kappa = 'abc'", "string", "real number in N/m"]),
+    ("kappa numeric text", lambda: ju.Ball(kappa="1e4"), ["kappa = '1e4'", "string"]),
+    ("kappa complex", lambda: ju.Ball(kappa=1e4 + 1j), ["kappa = (10000+1j)", "complex"]),
+    ("kappa None", lambda: ju.Ball(kappa=None), ["kappa = None"]),
+    ("mass object", lambda: _ball(mass=object()), ["mass = <object", "not numeric"]),
+    ("k_r boolean", lambda: _ball(k_r=True), ["k_r = True", "boolean"]),
+    ("coupling alpha text", lambda: ju.Coupling.table2(6, alpha="x"), ["alpha = 'x'", "string"]),
+    ("eps text", lambda: ju.Logistic("x"), ["eps = 'x'", "string"]),
+    ("law text", lambda: _ball(law="kv"), ["law = 'kv'", "KelvinVoigt()"]),
+    ("heaviside text", lambda: _ball(heaviside="exact"), ["heaviside = 'exact'", "Exact()"]),
+    ("outputs text", lambda: _sim(outputs="xv"), ["outputs = 'xv'", "tuple of names", "outputs=('x',)"]),
+    ("y0 text", lambda: _sim(y0="ab"), ["y0 = 'ab'", "string"]),
+    ("y0 complex", lambda: _sim(y0=[-0.4 + 1j, 0.0]), ["y0 = [(-0.4+1j), 0.0]", "complex"]),
+    ("t1 text", lambda: _sim(t1="1"), ["t1 = '1'", "string"]),
+    ("t_span text", lambda: _sim(t1=(0.0, "1")), ["t1 = '1'", "string"]),
+    ("dt text", lambda: _sim(solver="rk4", dt="1e-5"), ["dt = '1e-5'", "string"]),
+    ("rtol complex", lambda: _sim(rtol=1e-8j), ["rtol = 1e-08j", "complex"]),
+    ("ts text", lambda: _sim(ts="abc"), ["ts = 'abc'", "string"]),
+    ("contact_time text", lambda: ju.contact_time("a", 0.2, 1.0), ["kappa = 'a'", "string"]),
+    ("ball_state text", lambda: ju.ball_state("a", 0.0), ["x0 = 'a'", "string"]),
+]
+
+
+@pytest.mark.parametrize("label, call, parts", TYPES, ids=[a[0] for a in TYPES])
+def test_api_wrong_type_names_parameter_and_value(label, call, parts):
+    with pytest.raises(TypeError) as info:
+        call()
+    assert isinstance(info.value, ValueError)  # code that reports bad input as ValueError sees it
+    message = str(info.value)
+    for part in parts:
+        assert part in message, (label, message)
+
+
 def test_float32_is_refused_with_the_reason():
     """x64 off: simulate refuses before compiling, and says why and how to fix it."""
     jax.config.update("jax_enable_x64", False)
