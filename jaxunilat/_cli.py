@@ -70,6 +70,51 @@ def count(text: str) -> int:
     return int(value)
 
 
+def add_solver_knobs(group, *, max_steps: str, max_events: str) -> None:
+    """Add `simulate`'s step budget and event-mode settings as flags (defaults: the texts)."""
+    group.add_argument("--max-steps", type=count, help=f"step budget (default {max_steps})")
+    group.add_argument(
+        "--max-events",
+        type=count,
+        help=f"event mode: event buffer, entries/exits/extrema (default {max_events})",
+    )
+    group.add_argument(
+        "--piece-solver",
+        choices=("tsit5", "dopri8"),
+        help="event mode: Runge-Kutta pair of the smooth pieces (default tsit5; dopri8: fewer steps "
+        "at tolerances below ~1e-9)",
+    )
+    group.add_argument(
+        "--flight",
+        choices=("closed", "integrated"),
+        help="event mode: free flight in closed form where the model has one, or integrated (default closed)",
+    )
+
+
+def check_solver_knobs(args) -> None:
+    """Raise `UsageError` when an event-mode flag is given with another solver."""
+    if args.solver != "event":
+        for flag in ("max_events", "piece_solver", "flight"):
+            if getattr(args, flag) is not None:
+                raise UsageError(
+                    f"--{flag.replace('_', '-')} applies to --solver event only (got --solver {args.solver})"
+                )
+
+
+def solver_knobs(args) -> dict:
+    """The keyword arguments of `simulate` that the knob flags set (given ones only)."""
+    names = ("max_steps", "max_events", "piece_solver", "flight")
+    return {name: getattr(args, name) for name in names if getattr(args, name) is not None}
+
+
+def flag_spelling(knob: str, value: str | None = None) -> str:
+    """How a `simulate` keyword is written as a flag of `simulate ball|coupling` in a hint."""
+    if knob == "span":
+        return "--t1"
+    flag = "--" + knob.replace("_", "-")
+    return flag if value is None else f"{flag} {value}"
+
+
 def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
@@ -116,6 +161,7 @@ def _add_simulate_ball(models) -> None:
     run.add_argument("--dt", type=float, help="rk4 step, s (default 1e-5); tsit5: first step")
     run.add_argument("--rtol", type=float, default=1e-10, help="tsit5 relative tolerance (default 1e-10)")
     run.add_argument("--atol", type=float, default=1e-10, help="tsit5 absolute tolerance (default 1e-10)")
+    add_solver_knobs(run, max_steps="rk4: (t1 - t0)/dt + 16; tsit5: 200000; event: 16384", max_events="2048")
     out = p.add_argument_group("output")
     out.add_argument(
         "--samples",
@@ -187,7 +233,14 @@ def _contact_starts(contact, x):
 
 def _failure_message(status, args, ball) -> str:
     from ._simulate import Status
+    from ._solvers import DEFAULT_MAX_EVENTS, DEFAULT_MAX_STEPS, failure_hints
 
+    hints = failure_hints(
+        args.solver,
+        piece_solver=args.piece_solver or "tsit5",
+        flight=args.flight or "closed",
+        spell=flag_spelling,
+    )
     if status == Status.NONFINITE and args.solver == "rk4":
         t_c = math.pi * math.sqrt(float(ball.mass) / float(ball.kappa))
         return (
@@ -196,12 +249,20 @@ def _failure_message(status, args, ball) -> str:
             f"decrease --dt (e.g. --dt {t_c / 100:.1g}) or use --solver tsit5"
         )
     if status == Status.NONFINITE:
-        return "the solution became non-finite (NaN or inf); check the parameters or tighten --rtol/--atol"
+        return f"the solution became non-finite (NaN or inf); {hints['nonfinite']}"
     if status == Status.MAX_STEPS:
+        budget = args.max_steps
+        if budget is None:
+            budget = (
+                math.ceil(args.t1 / args.dt) + 16 if args.solver == "rk4" else DEFAULT_MAX_STEPS[args.solver]
+            )
         return (
-            f"the {args.solver} solver used all its steps before t1 = {args.t1:g} s; "
-            "shorten --t1, or loosen --rtol/--atol (tsit5), or increase --dt (rk4)"
+            f"the {args.solver} solver used all its --max-steps = {budget} steps before t1 = {args.t1:g} s; "
+            f"{hints['max_steps']}"
         )
+    if status == Status.EVENT_OVERFLOW:
+        events = DEFAULT_MAX_EVENTS if args.max_events is None else args.max_events
+        return f"more than --max-events = {events} events before t1 = {args.t1:g} s; {hints['max_events']}"
     return f"the {args.solver} solver failed before t1 = {args.t1:g} s (status {Status(status).name.lower()})"
 
 
@@ -218,6 +279,11 @@ def _describe(args, ball, x0, v0) -> list[tuple[str, str]]:
         solver = f"{args.solver}, rtol = {args.rtol:g}, atol = {args.atol:g}" + (
             "" if args.dt is None else f", first step {args.dt:g} s"
         )
+    if args.solver == "event":
+        solver += f", {args.piece_solver or 'tsit5'} pieces, {args.flight or 'closed'} flight"
+    for flag in ("max_steps", "max_events"):
+        if getattr(args, flag) is not None:
+            solver += f", {flag.replace('_', ' ')} {getattr(args, flag)}"
     return [
         ("run", f"ball, {'based on ' if overridden else ''}Table 1 example {args.example}"),
         (
@@ -239,6 +305,7 @@ def _run_simulate_ball(args) -> int:
     if args.solver == "rk4" and args.dt is None:
         args.dt = 1e-5
     ball, x0, v0 = _build_ball(args)
+    check_solver_knobs(args)
     _check_outputs(args)
     if not isinstance(args.samples, int) or args.samples < 2:
         raise ValueError(f"samples = {args.samples!r} is out of range; valid range is integers >= 2")
@@ -255,6 +322,7 @@ def _run_simulate_ball(args) -> int:
         samples=args.samples,
         outputs=("x", "v", "contact"),
         throw=False,
+        **solver_knobs(args),
     )
     status = int(sol.status)  # waits for the result
     wall = time.perf_counter() - start

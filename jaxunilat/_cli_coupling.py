@@ -10,7 +10,16 @@ import sys
 import time
 import warnings
 
-from ._cli import EXIT_OK, RunError, UsageError, count
+from ._cli import (
+    EXIT_OK,
+    RunError,
+    UsageError,
+    add_solver_knobs,
+    check_solver_knobs,
+    count,
+    flag_spelling,
+    solver_knobs,
+)
 
 COUPLING_HEADER = ("t", "psi_xi", "dpsi_xi", "psi_eta", "dpsi_eta", "T_xi", "T_eta")
 
@@ -48,6 +57,11 @@ def add_simulate_coupling(models) -> None:
     run.add_argument("--dt", type=float, help="rk4 step, s (default 1e-4); others: first step")
     run.add_argument("--rtol", type=float, default=1e-9, help="relative tolerance (default 1e-9)")
     run.add_argument("--atol", type=float, default=1e-12, help="absolute tolerance, rad (default 1e-12)")
+    add_solver_knobs(
+        run,
+        max_steps="rk4: max(400000, t1/dt + 16); tsit5: 400000; event: 32768 per started 10 s of t1",
+        max_events="4096 per started 10 s of t1",
+    )
     out = p.add_argument_group("output")
     out.add_argument(
         "--samples",
@@ -80,7 +94,7 @@ def _run_simulate_coupling(args) -> int:
 
     from ._io import check_output_paths
     from ._simulate import Status, simulate
-    from ._solvers import MAX_STEPS_LIMIT
+    from ._solvers import MAX_STEPS_LIMIT, failure_hints
     from ._validate import check_range
 
     check_range("t1", args.t1, lo=0.0, lo_open=True, unit="s")
@@ -89,12 +103,13 @@ def _run_simulate_coupling(args) -> int:
     if not isinstance(args.samples, int) or args.samples < 2:
         raise ValueError(f"samples = {args.samples!r} is out of range; valid range is integers >= 2")
     model = _build_coupling(args.example, args.params, args.reading, args.h)
+    check_solver_knobs(args)
     check_output_paths(("--out", args.out), ("--plot", args.plot))
     # The event mode's budgets are those of `reproduce` and the tests (one compilation) up to
     # 10 s, and grow with t1; RK4's covers t1/dt (one compilation up to 400 000 steps).
     blocks = math.ceil(args.t1 / 10.0)
     if args.solver == "event":
-        if 32_768 * blocks > MAX_STEPS_LIMIT:
+        if 32_768 * blocks > MAX_STEPS_LIMIT and args.max_steps is None:
             raise ValueError(
                 f"t1 = {args.t1:g} s is out of range for --solver event; valid range is "
                 f"(0, {10 * (MAX_STEPS_LIMIT // 32_768)}] s (a budget of 32768 steps per 10 s, "
@@ -105,6 +120,7 @@ def _run_simulate_coupling(args) -> int:
         max_steps = max(400_000, math.ceil(args.t1 / args.dt) + 16) if args.dt > 0 else 400_000
     else:
         max_steps = 400_000
+    knobs = {"max_steps": max_steps, "max_events": 4096 * blocks, **solver_knobs(args)}
     start = time.perf_counter()
     sol = simulate(
         model,
@@ -116,18 +132,24 @@ def _run_simulate_coupling(args) -> int:
         atol=args.atol,
         samples=args.samples,
         outputs=COUPLING_HEADER[1:],
-        max_steps=max_steps,
-        max_events=4096 * blocks,
         # throw=True as in `reproduce`, so that both share one compilation; main() reports
         # the solver's one-line message (exit 1).
         throw=args.solver != "rk4",
+        **knobs,
     )
     status = int(sol.status)
     wall = time.perf_counter() - start
     if status != Status.SUCCESS:
+        hints = failure_hints(
+            args.solver,
+            piece_solver=knobs.get("piece_solver", "tsit5"),
+            flight=knobs.get("flight", "closed"),
+            spell=flag_spelling,
+        )
         hint = {
-            Status.NONFINITE: "the solution became non-finite; decrease --dt (rk4) or tighten --rtol/--atol",
-            Status.MAX_STEPS: "the solver used all its steps; shorten --t1 or loosen --rtol/--atol",
+            Status.NONFINITE: f"the solution became non-finite; {hints['nonfinite']}",
+            Status.MAX_STEPS: f"the solver used all its --max-steps = {knobs['max_steps']} steps; {hints['max_steps']}",
+            Status.EVENT_OVERFLOW: f"more than --max-events = {knobs['max_events']} events; {hints['max_events']}",
         }.get(Status(status), f"status {Status(status).name.lower()}")
         raise RunError(f"the {args.solver} solver failed before t1 = {args.t1:g} s: {hint}")
     ys = {k: np.asarray(v) for k, v in sol.ys.items()}
@@ -148,7 +170,13 @@ def _run_simulate_coupling(args) -> int:
             "solver",
             f"rk4, dt = {args.dt:g} s"
             if args.solver == "rk4"
-            else f"{args.solver}, rtol = {args.rtol:g}, atol = {args.atol:g}",
+            else f"{args.solver}, rtol = {args.rtol:g}, atol = {args.atol:g}"
+            + (
+                f", {knobs.get('piece_solver', 'tsit5')} pieces, {knobs.get('flight', 'closed')} flight"
+                if args.solver == "event"
+                else ""
+            )
+            + f", max steps {knobs['max_steps']}",
         ),
         ("time", f"[0, {args.t1:g}] s, {args.samples} samples"),
         ("steps", f"{int(sol.num_steps)} (rejected {int(sol.num_rejected_steps)})"),

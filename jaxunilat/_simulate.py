@@ -20,7 +20,7 @@ from ._device_cache import DeviceCache
 from ._event import _EV as _EVENT_COLUMNS, EventRecord, event_solve
 from ._heaviside import Exact
 from ._model import AbstractModel
-from ._solvers import SolverSettings, make_settings
+from ._solvers import SolverSettings, failure_hints, make_settings
 from ._validate import (
     InputTypeError,
     as_float_array,
@@ -59,23 +59,20 @@ class Status(enum.IntEnum):
 
 
 def _messages(settings: SolverSettings) -> list[str]:
-    if settings.method == "rk4":
-        steps_hint = "increase max_steps or dt"
-        nonfinite_hint = (
-            "the fixed step dt is probably beyond RK4's stability limit for this contact "
-            "stiffness (contact time ~ pi*sqrt(m/kappa)); decrease dt, or use solver='tsit5'"
-        )
-    else:
-        steps_hint = "increase max_steps, loosen rtol/atol, or shorten the time span"
-        nonfinite_hint = "check the parameters for NaN/inf, or tighten rtol/atol"
+    hints = failure_hints(
+        settings.method,
+        piece_solver=settings.piece_solver,
+        flight=settings.flight,
+        dtmax=settings.dtmax is not None,
+    )
     return [
         f"jaxunilat.simulate: the solver used all max_steps = {settings.max_steps} steps "
-        f"before t1 ({settings.method}); {steps_hint}.",
-        f"jaxunilat.simulate: the solution became non-finite (NaN or inf); {nonfinite_hint}.",
+        f"before t1 ({settings.method}); {hints['max_steps']}.",
+        f"jaxunilat.simulate: the solution became non-finite (NaN or inf); {hints['nonfinite']}.",
         f"jaxunilat.simulate: the {settings.method} solver failed (diffrax reported an error "
         "other than max_steps); pass throw=False to inspect the partial result.",
         f"jaxunilat.simulate: more than max_events = {settings.max_events} events (entries, exits, "
-        "apexes, deepest points); increase max_events or shorten the time span.",
+        f"apexes, deepest points); {hints['max_events']}.",
     ]
 
 

@@ -45,6 +45,12 @@ class RK4(dfx.AbstractERK):
 
 
 SOLVERS = ("rk4", "tsit5", "event")
+#: The step budget of the adaptive methods when `max_steps` is not given (RK4's covers
+#: the span: ⌈(t1 − t0)/dt⌉ + 16).
+DEFAULT_MAX_STEPS = {"tsit5": 200_000, "event": 16_384}
+#: The event mode's event buffer when `max_events` is not given.
+DEFAULT_MAX_EVENTS = 2048
+
 #: The largest step budget a solve may have: RK4 takes about 0.1 µs per step on a CPU
 #: core with loop kernels (seconds for 1e8 steps), the event mode ~1 µs; a larger budget
 #: is more likely a units slip (dt in ms, t1 in ms) than a run anyone waits for.
@@ -109,6 +115,59 @@ class SolverSettings(eqx.Module):
     def adjoint(self):
         """diffrax's differentiation of `diffeqsolve` (RK4, Tsit5) for `autodiff`."""
         return dfx.ForwardMode() if self.autodiff == "forward" else dfx.RecursiveCheckpointAdjoint()
+
+
+def api_spelling(knob: str, value: str | None = None) -> str:
+    """How `simulate`'s keyword `knob` (set to `value`) is written in a hint."""
+    if knob == "span":
+        return "the time span"
+    return knob if value is None else f"{knob}={value!r}"
+
+
+def failure_hints(
+    method: str,
+    *,
+    piece_solver: str = "tsit5",
+    flight: str = "closed",
+    dtmax: bool = False,
+    spell=api_spelling,
+) -> dict[str, str]:
+    """What to change after a failure, naming only the knobs of `method`.
+
+    **Arguments:** the run's method and event-mode settings (`dtmax`: whether a step
+    cap was given), and
+    `spell(knob, value=None)`, how a knob is written: `api_spelling` (`max_steps`,
+    `piece_solver='dopri8'`), or the command line's flags.
+
+    **Returns:** a dict with a hint per failure: `"max_steps"` (the step budget ran
+    out), `"nonfinite"` (NaN or inf) and `"max_events"` (the event buffer is full).
+    """
+    span = spell("span")
+    tolerances = f"{spell('rtol')}/{spell('atol')}"
+    if method == "rk4":
+        steps = (
+            f"increase {spell('max_steps')} (to at least (t1 - t0)/dt) or {spell('dt')}, or shorten {span}"
+        )
+        nonfinite = (
+            f"the fixed step {spell('dt')} is probably beyond RK4's stability limit for this contact "
+            f"(contact time ~ pi*sqrt(m/kappa)); decrease {spell('dt')}, or use {spell('solver', 'tsit5')} "
+            f"or {spell('solver', 'event')}"
+        )
+    else:
+        cheaper = []
+        if method == "event" and piece_solver == "tsit5":
+            cheaper.append(f"{spell('piece_solver', 'dopri8')} (fewer steps at tolerances below ~1e-9)")
+        if method == "event" and flight == "integrated":
+            cheaper.append(f"{spell('flight', 'closed')} (one step per half flight)")
+        if method == "event" and dtmax:
+            cheaper.append(f"a larger {spell('dtmax')}")
+        steps = f"increase {spell('max_steps')}, loosen {tolerances}, " + (
+            f"use {', '.join(cheaper)}, " if cheaper else ""
+        )
+        steps += f"or shorten {span}"
+        nonfinite = f"check the parameters for NaN/inf, or tighten {tolerances}"
+    events = f"increase {spell('max_events')} or shorten {span}"
+    return {"max_steps": steps, "nonfinite": nonfinite, "max_events": events}
 
 
 #: Settings built from plain numbers, by their arguments, their arrays on the device:
@@ -182,10 +241,8 @@ def _build_settings(
         if not (is_concrete(dt) and is_concrete(span)):
             raise ValueError("max_steps must be given when dt or the time span is traced (rk4)")
         max_steps = int(math.ceil(float(span) / float(np.min(np.asarray(dt))))) + 16
-    elif method == "event":
-        max_steps = 16_384
     else:
-        max_steps = 200_000
+        max_steps = DEFAULT_MAX_STEPS[method]
     for name, value, low in (("max_events", max_events, 1), ("subgrid", subgrid, 1)):
         if not isinstance(value, (int, np.integer)) or value < low:
             raise ValueError(f"{name} = {value!r} is out of range; valid range is integers >= {low}")
