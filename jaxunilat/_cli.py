@@ -18,6 +18,7 @@ to import: heavy imports go inside the handler). Models under `simulate` are lis
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 import os
 import re
@@ -503,6 +504,11 @@ def main(argv: list[str] | None = None) -> int:
     # Before anything computes: the event mode's loops compile into single kernels.
     use_loop_kernels()
     remove_watcher = _exit_on_interrupt()
+    # A solver failure raised from inside a compiled run (throw=True) passes through a
+    # host callback, which JAX also logs with a traceback; the error's one line suffices.
+    callback_log = logging.getLogger("jax._src.callback")
+    callback_level = callback_log.level
+    callback_log.setLevel(logging.CRITICAL)
     try:
         args = build_parser().parse_args(argv)
         return int(args.func(args))
@@ -519,4 +525,5 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         return _fail("interrupted", EXIT_INTERRUPTED)
     finally:
+        callback_log.setLevel(callback_level)
         remove_watcher()

@@ -55,3 +55,14 @@ def test_literal_warns_on_stderr(capsys, tmp_path):
     )
     assert code == 0
     assert "physically absurd" in capsys.readouterr().err
+
+
+def test_solver_failure_inside_a_compiled_run_is_one_line(capsys, caplog):
+    """A failure raised from the compiled run (throw=True) reaches stderr as one line, without
+    the traceback JAX logs for the host callback that carries it."""
+    code = main(["simulate", "coupling", "--t1", "0.5", "--samples", "11", "--max-steps", "50"])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert "max_steps = 50" in err
+    assert not [r for r in caplog.records if r.levelname in ("ERROR", "CRITICAL")], caplog.text
