@@ -141,14 +141,14 @@ def _input_checks(model, y0, t0, t1, ts, settings: SolverSettings) -> list[tuple
     for name, value in (("dt", settings.dt), ("dtmax", settings.dtmax)):
         if value is not None:
             checks.append(runtime_check(name, value, lo=0.0, lo_open=True, unit="s"))
-    if settings.method == "rk4":
+    if settings.method == "rk4" and not settings.allow_coarse_dt:
         limit = model.rk4_step_limit(jnp)
         if limit is not None:
             checks.append(
                 (
                     "jaxunilat.simulate: dt is beyond rk4's stability limit for this contact, a tenth "
                     "of the contact time t_c = pi/omega_d (the traced dt or parameters); decrease dt, "
-                    "or use solver='tsit5' or solver='event'.",
+                    "or use solver='tsit5' or solver='event' (or pass allow_coarse_dt=True).",
                     jnp.all(settings.dt <= limit[0]),
                 )
             )
@@ -284,6 +284,7 @@ def simulate(
     *,
     solver: str = "tsit5",
     dt: ArrayLike | None = None,
+    allow_coarse_dt: bool = False,
     rtol: ArrayLike = 1e-8,
     atol: ArrayLike = 1e-8,
     max_steps: int | None = None,
@@ -309,7 +310,11 @@ def simulate(
       model with every contact entry and exit located, integrated piecewise with
       Tsit5 at `rtol`, `atol`; correct gradients through impacts; needs
       `heaviside=Exact()`).
-    - `dt`: the RK4 step, s (for the adaptive methods: an optional first step).
+    - `dt`: the RK4 step, s (for the adaptive methods: an optional first step). RK4
+      refuses a step above the model's limit, a tenth of the contact time
+      (`model.rk4_step_limit()`): coarser steps lose or misplace contacts, and diverge.
+    - `allow_coarse_dt`: RK4 only: run such a step anyway, e.g. to reproduce the
+      paper's dt = 1 ms with its lost contacts.
     - `rtol`, `atol`: the adaptive methods' tolerances.
     - `max_steps`: the step budget (see `SolverSettings`).
     - `max_events`: the event mode's event buffer size.
@@ -422,8 +427,9 @@ def simulate(
         piece_solver=piece_solver,
         flight=flight,
         autodiff=autodiff,
+        allow_coarse_dt=allow_coarse_dt,
     )
-    if solver == "rk4":
+    if solver == "rk4" and not allow_coarse_dt:
         _check_rk4_step(model, dt)
     return _run(model, y0, t0, t1, ts, settings, outputs, bool(throw))
 
@@ -451,5 +457,6 @@ def _check_rk4_step(model, dt) -> None:
         why = "the time scale 1/|lambda| of the overdamped contact's fastest mode"
     raise ValueError(
         f"dt = {step:g} s is beyond rk4's stability limit for this contact; valid range is "
-        f"(0, {limit:.3g}] s ({why}); use dt <= {limit:.3g} s, or solver='tsit5' or solver='event'"
+        f"(0, {limit:.3g}] s ({why}); use dt <= {limit:.3g} s, or solver='tsit5' or solver='event' "
+        "(allow_coarse_dt=True runs it anyway, losing contacts)"
     )

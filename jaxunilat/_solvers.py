@@ -88,6 +88,8 @@ class SolverSettings(eqx.Module):
       diffrax's `ForwardMode` for RK4 and Tsit5); reverse mode then raises. For a few
       parameters forward mode is the cheaper one: one tangent per parameter rides
       along with the solve. Static.
+    - `allow_coarse_dt`: RK4 only: accept a step above the model's limit (a tenth of
+      the contact time, `rk4_step_limit`), e.g. the paper's dt = 1 ms. Static.
     """
 
     method: str = eqx.field(static=True)
@@ -103,6 +105,7 @@ class SolverSettings(eqx.Module):
     piece_solver: str = eqx.field(static=True, default="tsit5")
     flight: str = eqx.field(static=True, default="closed")
     autodiff: str = eqx.field(static=True, default="reverse")
+    allow_coarse_dt: bool = eqx.field(static=True, default=False)
 
     def diffrax_solver(self):
         return RK4() if self.method == "rk4" else dfx.Tsit5()
@@ -181,6 +184,8 @@ def _plain(value):
     """A hashable stand-in for a plain number or None; `_UNCACHED` for anything else."""
     if value is None or isinstance(value, str):
         return value
+    if isinstance(value, (bool, np.bool_)):
+        return ("bool", bool(value))
     if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_)):
         return (type(value).__name__, float(value))
     if isinstance(value, np.ndarray) and value.shape == () and value.dtype.kind in "iuf":
@@ -216,6 +221,7 @@ def _build_settings(
     piece_solver: str = "tsit5",
     flight: str = "closed",
     autodiff: str = "reverse",
+    allow_coarse_dt: bool = False,
 ) -> SolverSettings:
     """Validate the solver arguments and build `SolverSettings`."""
     check_choice("solver", method, SOLVERS)
@@ -269,4 +275,5 @@ def _build_settings(
         piece_solver=piece_solver,
         flight=flight,
         autodiff=autodiff,
+        allow_coarse_dt=bool(allow_coarse_dt),
     )

@@ -140,6 +140,14 @@ def test_rk4_beyond_its_step_limit_is_refused(dt):
         assert part in message, message
 
 
+def test_rk4_coarse_step_runs_when_allowed_explicitly():
+    """The paper's dt = 1 ms, knowingly: it runs (and, as in the paper, loses upper contacts)."""
+    sol = rk4(jaxunilat.Ball.table1(2), PAPER_Y0, 2.0, 1e-3, allow_coarse_dt=True)
+    assert sol.ok
+    x = np.asarray(sol["x"])
+    assert np.all(np.isfinite(x)) and np.count_nonzero(np.diff((x > 0.4).astype(int)) == 1) < 3
+
+
 def test_rk4_beyond_its_step_limit_traced_is_a_failed_status():
     """Traced dt or parameters: status INVALID_INPUT (throw=False), or an error naming dt."""
     ball = jaxunilat.Ball.table1(2)
