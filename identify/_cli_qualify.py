@@ -61,7 +61,7 @@ def _run_qualify(args) -> int:
     import time
 
     from jaxunilat._cli import EXIT_OK, RunError, UsageError
-    from jaxunilat._io import check_output_path
+    from jaxunilat._io import check_output_paths
 
     from ._qualify import qualify, qualify_fit
 
@@ -72,8 +72,7 @@ def _run_qualify(args) -> int:
         raise UsageError("give FIT.json (from `jaxunilat identify --json`) or --kappa K --k-r R")
     if given and (args.kappa is None or args.k_r is None):
         raise UsageError("--kappa and --k-r go together; give both")
-    if args.json is not None:
-        check_output_path(args.json, inputs=[args.fit] if args.fit else [])
+    check_output_paths(("--json", args.json), inputs=(("FIT.json", args.fit),))
     test = dict(
         drop=args.drop,
         min_height=args.min_height,

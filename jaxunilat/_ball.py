@@ -2,17 +2,19 @@
 
 from __future__ import annotations
 
+import math
 from typing import ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike
 
-from ._contact import AbstractContactLaw, KelvinVoigt
+from ._contact import AbstractContactLaw, ClampedKelvinVoigt, KelvinVoigt, rk4_step_limit
 from ._flight import apex_rise, apex_time, fall_time, flight_state, longest_fall, rise_time
 from ._heaviside import AbstractHeaviside, Exact
 from ._model import AbstractModel
-from ._validate import check_range
+from ._validate import check_range, check_type, float_field, is_concrete, runtime_check
 
 #: A closed-form flight whose apex is within this many ulps of the upper wall grazes it
 #: without contact (see `Ball.flight_events`).
@@ -32,14 +34,6 @@ TABLE1 = {
     4: (5.0e3, 0.2),
     5: (2.0e4, 0.2),
 }
-
-
-def _optional_array(value):
-    return None if value is None else jnp.asarray(value, dtype=float)
-
-
-def _array(value):
-    return jnp.asarray(value, dtype=float)
 
 
 class Ball(AbstractModel):
@@ -71,13 +65,15 @@ class Ball(AbstractModel):
     their values are traced, so changing them does not recompile.
     """
 
-    kappa: Array = eqx.field(converter=_array)
-    k_r: Array | None = eqx.field(converter=_optional_array, default=0.2)
-    mass: Array = eqx.field(converter=_array, default=PAPER_MASS)
-    gravity: Array = eqx.field(converter=_array, default=PAPER_GRAVITY)
-    drag: Array | None = eqx.field(converter=_optional_array, default=PAPER_DRAG)
-    lower: Array | None = eqx.field(converter=_optional_array, default=-PAPER_GAP / 2)
-    upper: Array | None = eqx.field(converter=_optional_array, default=PAPER_GAP / 2)
+    kappa: Array = eqx.field(converter=float_field("kappa", "N/m"))
+    k_r: Array | None = eqx.field(converter=float_field("k_r", "N*s/m", optional=True), default=0.2)
+    mass: Array = eqx.field(converter=float_field("mass", "kg"), default=PAPER_MASS)
+    gravity: Array = eqx.field(converter=float_field("gravity", "m/s^2"), default=PAPER_GRAVITY)
+    drag: Array | None = eqx.field(converter=float_field("drag", "s/m", optional=True), default=PAPER_DRAG)
+    lower: Array | None = eqx.field(
+        converter=float_field("lower", "m", optional=True), default=-PAPER_GAP / 2
+    )
+    upper: Array | None = eqx.field(converter=float_field("upper", "m", optional=True), default=PAPER_GAP / 2)
     heaviside: AbstractHeaviside = Exact()
     law: AbstractContactLaw = KelvinVoigt()
 
@@ -91,16 +87,37 @@ class Ball(AbstractModel):
         "contact",
     )
 
-    def __check_init__(self):
-        check_range("kappa", self.kappa, lo=0.0, lo_open=True, unit="N/m")
-        check_range("k_r", self.k_r, lo=0.0, unit="N*s/m", allow_none=True)
-        check_range("mass", self.mass, lo=0.0, lo_open=True, unit="kg")
-        check_range("gravity", self.gravity, lo=0.0, unit="m/s^2")
-        check_range("drag", self.drag, lo=0.0, unit="s/m", allow_none=True)
-        check_range("lower", self.lower, unit="m", allow_none=True)
-        check_range("upper", self.upper, unit="m", allow_none=True)
+    def _ranges(self):
+        """(name, value, valid range as `check_range` keywords) of each parameter present."""
+        ranges = [
+            ("kappa", self.kappa, dict(lo=0.0, lo_open=True, unit="N/m")),
+            ("k_r", self.k_r, dict(lo=0.0, unit="N*s/m")),
+            ("mass", self.mass, dict(lo=0.0, lo_open=True, unit="kg")),
+            ("gravity", self.gravity, dict(lo=0.0, unit="m/s^2")),
+            ("drag", self.drag, dict(lo=0.0, unit="s/m")),
+            ("lower", self.lower, dict(unit="m")),
+            ("upper", self.upper, dict(unit="m")),
+        ]
         if self.lower is not None and self.upper is not None:
-            check_range("gap (upper - lower)", self.upper - self.lower, lo=0.0, lo_open=True, unit="m")
+            ranges.append(
+                ("gap (upper - lower)", self.upper - self.lower, dict(lo=0.0, lo_open=True, unit="m"))
+            )
+        eps = getattr(self.heaviside, "eps", None)
+        if eps is not None:
+            ranges.append(("eps", eps, dict(lo=0.0, lo_open=True, unit="m")))
+        return [(name, value, kw) for name, value, kw in ranges if value is not None]
+
+    def __check_init__(self):
+        check_type("heaviside", self.heaviside, AbstractHeaviside, "Exact(), Logistic(eps) or Softplus(eps)")
+        check_type(
+            "law", self.law, AbstractContactLaw, "KelvinVoigt(), HuntCrossley(n) or ClampedKelvinVoigt()"
+        )
+        for name, value, kw in self._ranges():
+            check_range(name, value, **kw)
+
+    def runtime_checks(self):
+        """Each parameter's range, checked at run time when it is traced (`simulate`)."""
+        return [runtime_check(name, value, **kw) for name, value, kw in self._ranges()]
 
     @classmethod
     def table1(cls, example: int = 2, **overrides) -> Ball:
@@ -115,6 +132,45 @@ class Ball(AbstractModel):
         kwargs = dict(kappa=kappa, k_r=k_r)
         kwargs.update(overrides)
         return cls(**kwargs)
+
+    def check_initial_state(self, y0) -> None:
+        """Raise `ValueError` when x0 lies inside a wall: the start must be between the
+        walls, ends included (the paper starts at the lower wall). A start inside a wall
+        by at most 10·m·g/κ (ten static sags: a ball resting in contact, m) plus rounding
+        is allowed. Skipped for traced values."""
+        x0 = y0[0]
+        walls = [w for w in (self.lower, self.upper) if w is not None]
+        if not walls or not all(is_concrete(v) for v in (x0, *walls)):
+            return
+        x = float(np.asarray(x0))
+        lo = -math.inf if self.lower is None else float(np.asarray(self.lower))
+        hi = math.inf if self.upper is None else float(np.asarray(self.upper))
+        if lo <= x <= hi:
+            return
+        depth, wall = (lo - x, "lower") if x < lo else (x - hi, "upper")
+        if all(is_concrete(v) for v in (self.mass, self.gravity, self.kappa)):
+            sag = (
+                float(np.asarray(self.mass)) * float(np.asarray(self.gravity)) / float(np.asarray(self.kappa))
+            )
+        else:
+            sag = 0.0
+        ulps = 64 * np.finfo(float).eps * max(abs(x), *(abs(v) for v in (lo, hi) if math.isfinite(v)))
+        allowed = 10 * sag + ulps
+        if depth <= allowed:
+            return
+        raise ValueError(
+            f"x0 = {x:g} m is out of range; valid range is [{lo:g}, {hi:g}] m, between the walls "
+            f"(it starts {depth:.3g} m inside the {wall} wall; at most 10*m*g/kappa = {10 * sag:.2g} m, "
+            "a ball resting in contact, is allowed)"
+        )
+
+    def rk4_step_limit(self, xp=jnp):
+        """The largest RK4 step, s, and the contact time, s: a tenth of the Kelvin–Voigt
+        contact time t_c = π/ω_d of κ, k_r and m (see `jaxunilat._contact.rk4_step_limit`).
+        `None` without walls, and for `HuntCrossley` (its stiffness depends on depth)."""
+        if self.num_switches == 0 or not isinstance(self.law, (KelvinVoigt, ClampedKelvinVoigt)):
+            return None
+        return rk4_step_limit(self.kappa, self.k_r, self.mass, xp)
 
     # -- physics ------------------------------------------------------------------
 
@@ -296,4 +352,4 @@ class Ball(AbstractModel):
 
 def ball_state(x0: ArrayLike, v0: ArrayLike) -> Array:
     """Pack an initial state y0 = (x0 [m], v0 [m/s])."""
-    return jnp.stack([jnp.asarray(x0, dtype=float), jnp.asarray(v0, dtype=float)])
+    return jnp.stack([float_field("x0", "m")(x0), float_field("v0", "m/s")(v0)])

@@ -18,6 +18,7 @@ to import: heavy imports go inside the handler). Models under `simulate` are lis
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 import os
 import re
@@ -53,6 +54,66 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message):
         raise UsageError(message)
+
+
+def count(text: str) -> int:
+    """An argparse type for counts: an integer, also spelled like `1e4` (integral only)."""
+    try:
+        return int(text)
+    except ValueError:
+        pass
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid count {text!r}; give an integer, e.g. 2001") from None
+    if not (math.isfinite(value) and value == int(value)):
+        raise argparse.ArgumentTypeError(f"invalid count {text!r}; give an integer, e.g. 2001")
+    return int(value)
+
+
+def add_solver_knobs(group, *, max_steps: str, max_events: str) -> None:
+    """Add `simulate`'s step budget and event-mode settings as flags (defaults: the texts)."""
+    group.add_argument("--max-steps", type=count, help=f"step budget (default {max_steps})")
+    group.add_argument(
+        "--max-events",
+        type=count,
+        help=f"event mode: event buffer, entries/exits/extrema (default {max_events})",
+    )
+    group.add_argument(
+        "--piece-solver",
+        choices=("tsit5", "dopri8"),
+        help="event mode: Runge-Kutta pair of the smooth pieces (default tsit5; dopri8: fewer steps "
+        "at tolerances below ~1e-9)",
+    )
+    group.add_argument(
+        "--flight",
+        choices=("closed", "integrated"),
+        help="event mode: free flight in closed form where the model has one, or integrated (default closed)",
+    )
+
+
+def check_solver_knobs(args) -> None:
+    """Raise `UsageError` when an event-mode flag is given with another solver."""
+    if args.solver != "event":
+        for flag in ("max_events", "piece_solver", "flight"):
+            if getattr(args, flag) is not None:
+                raise UsageError(
+                    f"--{flag.replace('_', '-')} applies to --solver event only (got --solver {args.solver})"
+                )
+
+
+def solver_knobs(args) -> dict:
+    """The keyword arguments of `simulate` that the knob flags set (given ones only)."""
+    names = ("max_steps", "max_events", "piece_solver", "flight")
+    return {name: getattr(args, name) for name in names if getattr(args, name) is not None}
+
+
+def flag_spelling(knob: str, value: str | None = None) -> str:
+    """How a `simulate` keyword is written as a flag of `simulate ball|coupling` in a hint."""
+    if knob == "span":
+        return "--t1"
+    flag = "--" + knob.replace("_", "-")
+    return flag if value is None else f"{flag} {value}"
 
 
 def _one_line(text: str) -> str:
@@ -101,10 +162,11 @@ def _add_simulate_ball(models) -> None:
     run.add_argument("--dt", type=float, help="rk4 step, s (default 1e-5); tsit5: first step")
     run.add_argument("--rtol", type=float, default=1e-10, help="tsit5 relative tolerance (default 1e-10)")
     run.add_argument("--atol", type=float, default=1e-10, help="tsit5 absolute tolerance (default 1e-10)")
+    add_solver_knobs(run, max_steps="rk4: (t1 - t0)/dt + 16; tsit5: 200000; event: 16384", max_events="2048")
     out = p.add_argument_group("output")
     out.add_argument(
         "--samples",
-        type=int,
+        type=count,
         default=2001,
         help="uniform output samples on [0, t1], ends included (default 2001)",
     )
@@ -142,6 +204,7 @@ def _build_ball(args):
     v0 = -1.0 / PAPER_DRAG if args.v0 is None else args.v0
     check_range("x0", x0, unit="m")
     check_range("v0", v0, unit="m/s")
+    ball.check_initial_state(np.array([x0, v0]))
     return ball, x0, v0
 
 
@@ -171,7 +234,14 @@ def _contact_starts(contact, x):
 
 def _failure_message(status, args, ball) -> str:
     from ._simulate import Status
+    from ._solvers import DEFAULT_MAX_EVENTS, DEFAULT_MAX_STEPS, failure_hints
 
+    hints = failure_hints(
+        args.solver,
+        piece_solver=args.piece_solver or "tsit5",
+        flight=args.flight or "closed",
+        spell=flag_spelling,
+    )
     if status == Status.NONFINITE and args.solver == "rk4":
         t_c = math.pi * math.sqrt(float(ball.mass) / float(ball.kappa))
         return (
@@ -180,12 +250,20 @@ def _failure_message(status, args, ball) -> str:
             f"decrease --dt (e.g. --dt {t_c / 100:.1g}) or use --solver tsit5"
         )
     if status == Status.NONFINITE:
-        return "the solution became non-finite (NaN or inf); check the parameters or tighten --rtol/--atol"
+        return f"the solution became non-finite (NaN or inf); {hints['nonfinite']}"
     if status == Status.MAX_STEPS:
+        budget = args.max_steps
+        if budget is None:
+            budget = (
+                math.ceil(args.t1 / args.dt) + 16 if args.solver == "rk4" else DEFAULT_MAX_STEPS[args.solver]
+            )
         return (
-            f"the {args.solver} solver used all its steps before t1 = {args.t1:g} s; "
-            "shorten --t1, or loosen --rtol/--atol (tsit5), or increase --dt (rk4)"
+            f"the {args.solver} solver used all its --max-steps = {budget} steps before t1 = {args.t1:g} s; "
+            f"{hints['max_steps']}"
         )
+    if status == Status.EVENT_OVERFLOW:
+        events = DEFAULT_MAX_EVENTS if args.max_events is None else args.max_events
+        return f"more than --max-events = {events} events before t1 = {args.t1:g} s; {hints['max_events']}"
     return f"the {args.solver} solver failed before t1 = {args.t1:g} s (status {Status(status).name.lower()})"
 
 
@@ -202,6 +280,11 @@ def _describe(args, ball, x0, v0) -> list[tuple[str, str]]:
         solver = f"{args.solver}, rtol = {args.rtol:g}, atol = {args.atol:g}" + (
             "" if args.dt is None else f", first step {args.dt:g} s"
         )
+    if args.solver == "event":
+        solver += f", {args.piece_solver or 'tsit5'} pieces, {args.flight or 'closed'} flight"
+    for flag in ("max_steps", "max_events"):
+        if getattr(args, flag) is not None:
+            solver += f", {flag.replace('_', ' ')} {getattr(args, flag)}"
     return [
         ("run", f"ball, {'based on ' if overridden else ''}Table 1 example {args.example}"),
         (
@@ -223,6 +306,7 @@ def _run_simulate_ball(args) -> int:
     if args.solver == "rk4" and args.dt is None:
         args.dt = 1e-5
     ball, x0, v0 = _build_ball(args)
+    check_solver_knobs(args)
     _check_outputs(args)
     if not isinstance(args.samples, int) or args.samples < 2:
         raise ValueError(f"samples = {args.samples!r} is out of range; valid range is integers >= 2")
@@ -239,6 +323,7 @@ def _run_simulate_ball(args) -> int:
         samples=args.samples,
         outputs=("x", "v", "contact"),
         throw=False,
+        **solver_knobs(args),
     )
     status = int(sol.status)  # waits for the result
     wall = time.perf_counter() - start
@@ -357,12 +442,74 @@ def _fail(message: str, code: int) -> int:
     return code
 
 
+EXIT_INTERRUPTED = 130
+
+
+def _exit_on_interrupt():
+    """Make Ctrl-C end the command at once, also while it waits inside a compilation
+    or a compiled solve (where Python's own handler would only run once that returns,
+    minutes or hours later): the signal wakes a watcher thread, which prints one line
+    and exits with 130. Returns the function that removes the watcher again; a no-op
+    outside the main thread (signals can only be handled there)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+    read_fd, write_fd = os.pipe()
+    os.set_blocking(write_fd, False)
+    try:
+        old_fd = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
+    except ValueError:  # e.g. a Python without signal support here
+        os.close(read_fd)
+        os.close(write_fd)
+        return lambda: None
+    # A Python handler must be set for the wakeup byte to be written; this one does
+    # nothing, so that the main thread does not report the interrupt a second time.
+    old_handler = signal.signal(signal.SIGINT, lambda signum, frame: None)
+
+    def watch():
+        while True:
+            try:
+                data = os.read(read_fd, 1)
+            except OSError:
+                return
+            if not data:  # the write end was closed: the command finished
+                return
+            if data[0] == signal.SIGINT:
+                os.write(2, f"{PROG}: error: interrupted\n".encode())
+                os._exit(EXIT_INTERRUPTED)
+
+    watcher = threading.Thread(target=watch, name="jaxunilat-interrupt", daemon=True)
+    watcher.start()
+
+    def remove():
+        signal.signal(signal.SIGINT, old_handler)
+        signal.set_wakeup_fd(old_fd)
+        os.close(write_fd)
+        watcher.join()
+        os.close(read_fd)
+
+    return remove
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Run the command line with `argv` (default: `sys.argv[1:]`); return the exit code."""
+    """Run the command line with `argv` (default: `sys.argv[1:]`); return the exit code.
+
+    Ctrl-C ends a command at once with one line, `jaxunilat: error: interrupted`, and
+    exit code 130. Output files are written after the computation: an interrupted solve
+    leaves none (an interrupt while one is being written may leave it incomplete).
+    """
     from ._loop_kernels import use_loop_kernels
 
     # Before anything computes: the event mode's loops compile into single kernels.
     use_loop_kernels()
+    remove_watcher = _exit_on_interrupt()
+    # A solver failure raised from inside a compiled run (throw=True) passes through a
+    # host callback, which JAX also logs with a traceback; the error's one line suffices.
+    callback_log = logging.getLogger("jax._src.callback")
+    callback_level = callback_log.level
+    callback_log.setLevel(logging.CRITICAL)
     try:
         args = build_parser().parse_args(argv)
         return int(args.func(args))
@@ -377,4 +524,7 @@ def main(argv: list[str] | None = None) -> int:
         ours = [line for line in text.splitlines() if "jaxunilat" in line]
         return _fail((ours or text.splitlines() or [type(err).__name__])[0], EXIT_RUNTIME)
     except KeyboardInterrupt:
-        return _fail("interrupted", 130)
+        return _fail("interrupted", EXIT_INTERRUPTED)
+    finally:
+        callback_log.setLevel(callback_level)
+        remove_watcher()

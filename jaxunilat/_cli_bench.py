@@ -5,6 +5,9 @@ from __future__ import annotations
 import argparse
 import os
 
+#: The files `bench` writes into its --out folder.
+OUTPUT_FILES = ("bench.json", "work_precision.png", "throughput.png")
+
 
 def add_bench(commands) -> None:
     """Add the `bench` command to the top-level subparsers."""
@@ -24,7 +27,10 @@ def add_bench(commands) -> None:
 
 def _run_bench(args) -> int:
     from ._cli import EXIT_OK, RunError, UsageError
+    from ._io import check_output_dir
 
+    out = args.out
+    check_output_dir("--out", out, OUTPUT_FILES)
     try:
         import scipy  # noqa: F401
     except ImportError:
@@ -32,9 +38,6 @@ def _run_bench(args) -> int:
             'jaxunilat bench needs scipy; install it with: pip install "jaxunilat[bench]"'
         ) from None
     size = args.size or ("quick" if args.quick else "full")
-    out = args.out
-    if os.path.exists(out) and not os.path.isdir(out):
-        raise ValueError(f"--out {out!r} exists and is not a folder")
     try:
         os.makedirs(out, exist_ok=True)
     except OSError as err:
@@ -51,7 +54,7 @@ def _run_bench(args) -> int:
     from ._bench_plot import throughput_figure, work_precision_figure
 
     result = run_bench(size, log=lambda line: print(line, flush=True))
-    paths = {name: os.path.join(out, name) for name in ("bench.json", "work_precision.png", "throughput.png")}
+    paths = {name: os.path.join(out, name) for name in OUTPUT_FILES}
     try:
         with open(paths["bench.json"], "w", encoding="utf-8") as fh:
             json.dump(result, fh, indent=1, allow_nan=False)

@@ -6,12 +6,20 @@ Light to import: everything heavy is imported inside the handlers.
 from __future__ import annotations
 
 import math
-import os
 import sys
 import time
 import warnings
 
-from ._cli import EXIT_OK, RunError, UsageError
+from ._cli import (
+    EXIT_OK,
+    RunError,
+    UsageError,
+    add_solver_knobs,
+    check_solver_knobs,
+    count,
+    flag_spelling,
+    solver_knobs,
+)
 
 COUPLING_HEADER = ("t", "psi_xi", "dpsi_xi", "psi_eta", "dpsi_eta", "T_xi", "T_eta")
 
@@ -49,9 +57,17 @@ def add_simulate_coupling(models) -> None:
     run.add_argument("--dt", type=float, help="rk4 step, s (default 1e-4); others: first step")
     run.add_argument("--rtol", type=float, default=1e-9, help="relative tolerance (default 1e-9)")
     run.add_argument("--atol", type=float, default=1e-12, help="absolute tolerance, rad (default 1e-12)")
+    add_solver_knobs(
+        run,
+        max_steps="rk4: max(400000, t1/dt + 16); tsit5: 400000; event: 32768 per started 10 s of t1",
+        max_events="4096 per started 10 s of t1",
+    )
     out = p.add_argument_group("output")
     out.add_argument(
-        "--samples", type=int, default=10001, help="uniform samples on [0, t1], ends included (default 10001)"
+        "--samples",
+        type=count,
+        default=10001,
+        help="uniform samples on [0, t1], ends included (default 10001)",
     )
     out.add_argument(
         "--out", metavar="FILE.csv", help="write the samples as CSV with header " + ",".join(COUPLING_HEADER)
@@ -78,6 +94,7 @@ def _run_simulate_coupling(args) -> int:
 
     from ._io import check_output_paths
     from ._simulate import Status, simulate
+    from ._solvers import MAX_STEPS_LIMIT, failure_hints
     from ._validate import check_range
 
     check_range("t1", args.t1, lo=0.0, lo_open=True, unit="s")
@@ -86,18 +103,24 @@ def _run_simulate_coupling(args) -> int:
     if not isinstance(args.samples, int) or args.samples < 2:
         raise ValueError(f"samples = {args.samples!r} is out of range; valid range is integers >= 2")
     model = _build_coupling(args.example, args.params, args.reading, args.h)
+    check_solver_knobs(args)
     check_output_paths(("--out", args.out), ("--plot", args.plot))
-    if args.solver == "rk4":
-        check_range("dt", args.dt, lo=0.0, lo_open=True, unit="s")
-        # Classic RK4 is stable for an undamped oscillator while ω·dt < 2.78 (ω_c: contact frequency).
-        w_c = math.sqrt(float(model.kappa) * float(model.length) / float(model.j_t))
-        if args.dt * w_c >= 2.78:
+    # The event mode's budgets are those of `reproduce` and the tests (one compilation) up to
+    # 10 s, and grow with t1; RK4's covers t1/dt (one compilation up to 400 000 steps).
+    blocks = math.ceil(args.t1 / 10.0)
+    if args.solver == "event":
+        if 32_768 * blocks > MAX_STEPS_LIMIT and args.max_steps is None:
             raise ValueError(
-                f"dt = {args.dt:g} s is beyond RK4's stability limit 2.78/omega_c = {2.78 / w_c:.3g} s for "
-                f"this contact (omega_c = sqrt(kappa*l/J) = {w_c:.4g} rad/s); decrease --dt or use --solver event"
+                f"t1 = {args.t1:g} s is out of range for --solver event; valid range is "
+                f"(0, {10 * (MAX_STEPS_LIMIT // 32_768)}] s (a budget of 32768 steps per 10 s, "
+                f"at most {MAX_STEPS_LIMIT:.0e} steps)"
             )
-    # The event mode's budgets are those of `reproduce` and the tests (one compilation) up to 10 s.
-    max_steps = 400_000 if args.solver != "event" else 32_768 * math.ceil(args.t1 / 10.0)
+        max_steps = 32_768 * blocks
+    elif args.solver == "rk4":
+        max_steps = max(400_000, math.ceil(args.t1 / args.dt) + 16) if args.dt > 0 else 400_000
+    else:
+        max_steps = 400_000
+    knobs = {"max_steps": max_steps, "max_events": 4096 * blocks, **solver_knobs(args)}
     start = time.perf_counter()
     sol = simulate(
         model,
@@ -109,18 +132,24 @@ def _run_simulate_coupling(args) -> int:
         atol=args.atol,
         samples=args.samples,
         outputs=COUPLING_HEADER[1:],
-        max_steps=max_steps,
-        max_events=4096 * math.ceil(args.t1 / 10.0),
         # throw=True as in `reproduce`, so that both share one compilation; main() reports
         # the solver's one-line message (exit 1).
         throw=args.solver != "rk4",
+        **knobs,
     )
     status = int(sol.status)
     wall = time.perf_counter() - start
     if status != Status.SUCCESS:
+        hints = failure_hints(
+            args.solver,
+            piece_solver=knobs.get("piece_solver", "tsit5"),
+            flight=knobs.get("flight", "closed"),
+            spell=flag_spelling,
+        )
         hint = {
-            Status.NONFINITE: "the solution became non-finite; decrease --dt (rk4) or tighten --rtol/--atol",
-            Status.MAX_STEPS: "the solver used all its steps; shorten --t1 or loosen --rtol/--atol",
+            Status.NONFINITE: f"the solution became non-finite; {hints['nonfinite']}",
+            Status.MAX_STEPS: f"the solver used all its --max-steps = {knobs['max_steps']} steps; {hints['max_steps']}",
+            Status.EVENT_OVERFLOW: f"more than --max-events = {knobs['max_events']} events; {hints['max_events']}",
         }.get(Status(status), f"status {Status(status).name.lower()}")
         raise RunError(f"the {args.solver} solver failed before t1 = {args.t1:g} s: {hint}")
     ys = {k: np.asarray(v) for k, v in sol.ys.items()}
@@ -141,7 +170,13 @@ def _run_simulate_coupling(args) -> int:
             "solver",
             f"rk4, dt = {args.dt:g} s"
             if args.solver == "rk4"
-            else f"{args.solver}, rtol = {args.rtol:g}, atol = {args.atol:g}",
+            else f"{args.solver}, rtol = {args.rtol:g}, atol = {args.atol:g}"
+            + (
+                f", {knobs.get('piece_solver', 'tsit5')} pieces, {knobs.get('flight', 'closed')} flight"
+                if args.solver == "event"
+                else ""
+            )
+            + f", max steps {knobs['max_steps']}",
         ),
         ("time", f"[0, {args.t1:g}] s, {args.samples} samples"),
         ("steps", f"{int(sol.num_steps)} (rejected {int(sol.num_rejected_steps)})"),
@@ -246,13 +281,10 @@ def add_reproduce(commands) -> None:
 
 
 def _run_reproduce(args) -> int:
-    from ._reproduce import reproduce
+    from ._io import check_output_dir
+    from ._reproduce import FIGURES, SUMMARY, reproduce
 
-    parent = os.path.dirname(os.path.abspath(args.out))
-    if not os.path.isdir(parent):
-        raise ValueError(f"--out {args.out!r}: the directory {parent!r} does not exist")
-    if os.path.exists(args.out) and not os.path.isdir(args.out):
-        raise ValueError(f"--out {args.out!r} is a file; give a directory")
+    check_output_dir("--out", args.out, (*FIGURES, SUMMARY), parent_must_exist=True)
     try:
         report = reproduce(args.out, quick=args.quick, log=print)
     except OSError as err:

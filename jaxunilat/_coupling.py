@@ -37,10 +37,10 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array
 
-from ._contact import AbstractContactLaw, KelvinVoigt
+from ._contact import AbstractContactLaw, ClampedKelvinVoigt, KelvinVoigt, rk4_step_limit
 from ._heaviside import AbstractHeaviside, Exact
 from ._model import AbstractModel
-from ._validate import check_choice, check_range
+from ._validate import check_choice, check_range, check_type, float_field, runtime_check
 
 #: The paper's constants [K90 §5.2]: mass (kg), length l (m), diameter d (m), lever l_p (m),
 #: spin-up rate a (1/s), c (dimensionless), gravity (m/s²).
@@ -68,14 +68,6 @@ READINGS = ("paper", "rotating")
 
 #: Which state component each switch watches (ψ_ξ twice, then ψ_η twice), and its side.
 _SWITCH_COORD = (0, 0, 2, 2)
-
-
-def _array(value):
-    return jnp.asarray(value, dtype=float)
-
-
-def _optional_array(value):
-    return None if value is None else jnp.asarray(value, dtype=float)
 
 
 def transverse_inertia(mass, length):
@@ -109,20 +101,22 @@ class Coupling(AbstractModel):
     Parameters are traced leaves: changing their values does not recompile.
     """
 
-    alpha: Array = eqx.field(converter=_array)
-    clearance: Array = eqx.field(converter=_array)
-    b: Array = eqx.field(converter=_array)
-    kappa: Array = eqx.field(converter=_array)
-    k_r: Array | None = eqx.field(converter=_optional_array, default=None)
-    h: Array | None = eqx.field(converter=_optional_array, default=0.0)
-    clearance_eta: Array | None = eqx.field(converter=_optional_array, default=None)
-    mass: Array = eqx.field(converter=_array, default=COUPLING_MASS)
-    length: Array = eqx.field(converter=_array, default=COUPLING_LENGTH)
-    diameter: Array = eqx.field(converter=_array, default=COUPLING_DIAMETER)
-    lever: Array = eqx.field(converter=_array, default=COUPLING_LEVER)
-    a: Array = eqx.field(converter=_array, default=COUPLING_SPINUP)
-    c: Array = eqx.field(converter=_array, default=COUPLING_C)
-    gravity: Array = eqx.field(converter=_array, default=COUPLING_GRAVITY)
+    alpha: Array = eqx.field(converter=float_field("alpha"))
+    clearance: Array = eqx.field(converter=float_field("clearance", "m"))
+    b: Array = eqx.field(converter=float_field("b", "1/s"))
+    kappa: Array = eqx.field(converter=float_field("kappa", "N/rad"))
+    k_r: Array | None = eqx.field(converter=float_field("k_r", "N*s/rad", optional=True), default=None)
+    h: Array | None = eqx.field(converter=float_field("h", "N*s/rad", optional=True), default=0.0)
+    clearance_eta: Array | None = eqx.field(
+        converter=float_field("clearance_eta", "m", optional=True), default=None
+    )
+    mass: Array = eqx.field(converter=float_field("mass", "kg"), default=COUPLING_MASS)
+    length: Array = eqx.field(converter=float_field("length", "m"), default=COUPLING_LENGTH)
+    diameter: Array = eqx.field(converter=float_field("diameter", "m"), default=COUPLING_DIAMETER)
+    lever: Array = eqx.field(converter=float_field("lever", "m"), default=COUPLING_LEVER)
+    a: Array = eqx.field(converter=float_field("a", "1/s"), default=COUPLING_SPINUP)
+    c: Array = eqx.field(converter=float_field("c"), default=COUPLING_C)
+    gravity: Array = eqx.field(converter=float_field("gravity", "m/s^2"), default=COUPLING_GRAVITY)
     reading: str = eqx.field(static=True, default="paper")
     heaviside: AbstractHeaviside = Exact()
     law: AbstractContactLaw = KelvinVoigt()
@@ -143,22 +137,41 @@ class Coupling(AbstractModel):
         "contact",
     )
 
+    def _ranges(self):
+        """(name, value, valid range as `check_range` keywords) of each parameter present."""
+        ranges = [
+            ("alpha", self.alpha, {}),
+            ("clearance", self.clearance, dict(lo=0.0, lo_open=True, unit="m")),
+            ("clearance_eta", self.clearance_eta, dict(lo=0.0, lo_open=True, unit="m")),
+            ("b", self.b, dict(unit="1/s")),
+            ("kappa", self.kappa, dict(lo=0.0, lo_open=True, unit="N/rad")),
+            ("k_r", self.k_r, dict(lo=0.0, unit="N*s/rad")),
+            ("h", self.h, dict(lo=0.0, unit="N*s/rad")),
+            ("mass", self.mass, dict(lo=0.0, lo_open=True, unit="kg")),
+            ("length", self.length, dict(lo=0.0, lo_open=True, unit="m")),
+            ("diameter", self.diameter, dict(lo=0.0, lo_open=True, unit="m")),
+            ("lever", self.lever, dict(unit="m")),
+            ("a", self.a, dict(lo=0.0, lo_open=True, unit="1/s")),
+            ("c", self.c, {}),
+            ("gravity", self.gravity, dict(lo=0.0, unit="m/s^2")),
+        ]
+        eps = getattr(self.heaviside, "eps", None)
+        if eps is not None:
+            ranges.append(("eps", eps, dict(lo=0.0, lo_open=True, unit="rad")))
+        return [(name, value, kw) for name, value, kw in ranges if value is not None]
+
     def __check_init__(self):
         check_choice("reading", self.reading, READINGS)
-        check_range("alpha", self.alpha)
-        check_range("clearance", self.clearance, lo=0.0, lo_open=True, unit="m")
-        check_range("clearance_eta", self.clearance_eta, lo=0.0, lo_open=True, unit="m", allow_none=True)
-        check_range("b", self.b, unit="1/s")
-        check_range("kappa", self.kappa, lo=0.0, lo_open=True, unit="N/rad")
-        check_range("k_r", self.k_r, lo=0.0, unit="N*s/rad", allow_none=True)
-        check_range("h", self.h, lo=0.0, unit="N*s/rad", allow_none=True)
-        check_range("mass", self.mass, lo=0.0, lo_open=True, unit="kg")
-        check_range("length", self.length, lo=0.0, lo_open=True, unit="m")
-        check_range("diameter", self.diameter, lo=0.0, lo_open=True, unit="m")
-        check_range("lever", self.lever, unit="m")
-        check_range("a", self.a, lo=0.0, lo_open=True, unit="1/s")
-        check_range("c", self.c)
-        check_range("gravity", self.gravity, lo=0.0, unit="m/s^2")
+        check_type("heaviside", self.heaviside, AbstractHeaviside, "Exact(), Logistic(eps) or Softplus(eps)")
+        check_type(
+            "law", self.law, AbstractContactLaw, "KelvinVoigt(), HuntCrossley(n) or ClampedKelvinVoigt()"
+        )
+        for name, value, kw in self._ranges():
+            check_range(name, value, **kw)
+
+    def runtime_checks(self):
+        """Each parameter's range, checked at run time when it is traced (`simulate`)."""
+        return [runtime_check(name, value, **kw) for name, value, kw in self._ranges()]
 
     @classmethod
     def table2(
@@ -243,6 +256,16 @@ class Coupling(AbstractModel):
     def phi(self, t) -> Array:
         """φ(t) = b[c t − (1 − e^(−at))/a], rad, with φ(0) = 0."""
         return self.b * (self.c * t + jnp.expm1(-self.a * t) / self.a)
+
+    def rk4_step_limit(self, xp=jnp):
+        """The largest RK4 step, s, and the joint's contact time, s: a tenth of the
+        Kelvin–Voigt contact time of κ, the damping k_r + h and the contact mass J_t/l
+        (see `jaxunilat._contact.rk4_step_limit`). `None` for `HuntCrossley`."""
+        if not isinstance(self.law, (KelvinVoigt, ClampedKelvinVoigt)):
+            return None
+        damping = [d for d in (self.k_r, self.h) if d is not None]
+        k_r = None if not damping else sum(damping[1:], damping[0])
+        return rk4_step_limit(self.kappa, k_r, self.j_t / self.length, xp)
 
     # -- physics ------------------------------------------------------------------
 

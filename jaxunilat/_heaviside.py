@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike
 
-from ._validate import check_range
+from ._validate import check_range, real_number
 
 
 class AbstractHeaviside(eqx.Module):
@@ -66,7 +66,7 @@ class Exact(AbstractHeaviside):
 class AbstractSmoothHeaviside(AbstractHeaviside):
     """A smooth option of width ε > 0 (in the units of `z`), with H(z) ≈ σ(z/ε)."""
 
-    eps: Array = eqx.field(converter=jnp.asarray)
+    eps: Array = eqx.field(converter=lambda eps: jnp.asarray(real_number("eps", eps, unit="m")))
 
     def __check_init__(self):
         check_range("eps", self.eps, lo=0.0, lo_open=True, unit="m")

@@ -78,6 +78,35 @@ def check_output_paths(
                 )
 
 
+def check_output_dir(
+    flag: str,
+    path: str | os.PathLike,
+    files: Iterable[str] = (),
+    *,
+    inputs: Iterable[tuple[str, str | os.PathLike | None]] = (),
+    parent_must_exist: bool = False,
+) -> None:
+    """Check an output directory before any work starts.
+
+    Raises `ValueError` naming `flag` when `path` exists and is not a directory (a
+    file, or a link to one or to nothing), when `parent_must_exist` and its parent
+    directory is missing, or when one of the `files` it will write inside (bare
+    names) could not be written or would resolve to an input or to another of them
+    (see `check_output_paths`). A missing `path` is fine: the command creates it.
+    """
+    path = os.fspath(path)
+    if os.path.lexists(path) and not os.path.isdir(path):
+        kind = "a broken link" if not os.path.exists(path) else "an existing file"
+        raise ValueError(f"{flag} {path!r} is {kind}, not a directory; give a directory (created if missing)")
+    parent = os.path.dirname(os.path.abspath(path))
+    if parent_must_exist and not os.path.isdir(parent):
+        raise ValueError(f"{flag} {path!r}: the directory {parent!r} does not exist")
+    if os.path.isdir(path):
+        check_output_paths(
+            *((f"{flag} file {name}", os.path.join(path, name)) for name in files), inputs=inputs
+        )
+
+
 def write_csv(
     path: str | os.PathLike,
     header: Sequence[str],

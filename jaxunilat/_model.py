@@ -6,6 +6,7 @@ import abc
 from typing import ClassVar
 
 import equinox as eqx
+import jax.numpy as jnp
 from jaxtyping import Array
 
 
@@ -27,3 +28,22 @@ class AbstractModel(eqx.Module):
     @abc.abstractmethod
     def output(self, name: str, t: Array, y: Array) -> Array:
         """One named output (see `output_names`) at time t and state y."""
+
+    def runtime_checks(self) -> list[tuple[str, Array]]:
+        """`(message, valid)` per parameter check, for traced parameters (see
+        `jaxunilat._validate.runtime_check`): what `__check_init__` checks on concrete
+        values, which `simulate` evaluates once before the solve."""
+        return []
+
+    def check_initial_state(self, y0) -> None:
+        """Raise `ValueError` naming the component when a concrete initial state is
+        unphysical (e.g. deep inside a wall); traced values are not checked. `simulate`
+        calls it with y0 as a float64 array."""
+        del y0
+
+    def rk4_step_limit(self, xp=jnp) -> tuple[Array, Array] | None:
+        """The largest step `simulate(solver="rk4")` accepts, s, and the contact time
+        it derives from, s (see `jaxunilat._contact.rk4_step_limit`); `None` where the
+        model has no known limit. `xp`: `jax.numpy`, or `numpy` for concrete values."""
+        del xp
+        return None

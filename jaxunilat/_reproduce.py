@@ -32,6 +32,8 @@ FIGURES = {
     "fig09_10_coupling_forces_literal.png": "Figs 9-10 with the literal constants",
     "fig11_14_coupling_literal.png": "Figs 11-14 with the literal constants, example 6",
 }
+#: The summary `reproduce` writes next to the figures (Tables 1 and 2, the claims).
+SUMMARY = "summary.md"
 
 _BALL_RUN = dict(solver="event", rtol=1e-10, atol=1e-10, samples=2001, outputs=("x", "v"))
 _COUPLING_OUTPUTS = ("psi_xi", "dpsi_xi", "psi_eta", "dpsi_eta", "T_xi", "T_eta")
@@ -433,7 +435,7 @@ def reproduce(out: str | os.PathLike, *, quick: bool = False, log: Callable[[str
                 sets[(params, reading)] = runs
                 claims += coupling_claims(runs, params, reading)
     figures = _write_figures(out, ball, sets[("stiff", "paper")], sets[("literal", "paper")], log)
-    summary = os.path.join(out, "summary.md")
+    summary = os.path.join(out, SUMMARY)
     with open(summary, "w") as f:
         f.write(_summary(ball, sets, claims, quick, t1_ball))
     log(f"wrote {summary}")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import enum
+import math
 import re
 from collections import Counter
 
@@ -14,13 +15,26 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
 
+from ._contact import RK4_STEPS_PER_CONTACT
 from ._device_cache import DeviceCache
-from ._event import EventRecord, event_solve
+from ._event import _EV as _EVENT_COLUMNS, EventRecord, event_solve
 from ._heaviside import Exact
 from ._model import AbstractModel
-from ._solvers import SolverSettings, make_settings
-from ._validate import as_float_array, check_choice, check_range, is_concrete
+from ._solvers import SolverSettings, failure_hints, make_settings
+from ._validate import (
+    InputTypeError,
+    as_float_array,
+    check_choice,
+    check_range,
+    is_concrete,
+    real_number,
+    runtime_check,
+)
 
+#: The most memory `simulate` lets one run's save times and outputs (or the event
+#: mode's event buffer) take, bytes: beyond it, a ValueError names `samples` or
+#: `max_events` before anything is allocated.
+MAX_OUTPUT_BYTES = 4 * 2**30
 #: How many times each jitted function was traced (compiled). Tests and the
 #: benchmark read it to prove that new parameter values do not retrace.
 _TRACES: Counter = Counter()
@@ -39,26 +53,26 @@ class Status(enum.IntEnum):
     NONFINITE = 2
     SOLVER_FAILED = 3
     EVENT_OVERFLOW = 4
+    #: A traced input out of its valid range (concrete ones raise `ValueError` before
+    #: the solve): the outputs are meaningless. With `throw=True` the error names it.
+    INVALID_INPUT = 5
 
 
 def _messages(settings: SolverSettings) -> list[str]:
-    if settings.method == "rk4":
-        steps_hint = "increase max_steps or dt"
-        nonfinite_hint = (
-            "the fixed step dt is probably beyond RK4's stability limit for this contact "
-            "stiffness (contact time ~ pi*sqrt(m/kappa)); decrease dt, or use solver='tsit5'"
-        )
-    else:
-        steps_hint = "increase max_steps, loosen rtol/atol, or shorten the time span"
-        nonfinite_hint = "check the parameters for NaN/inf, or tighten rtol/atol"
+    hints = failure_hints(
+        settings.method,
+        piece_solver=settings.piece_solver,
+        flight=settings.flight,
+        dtmax=settings.dtmax is not None,
+    )
     return [
         f"jaxunilat.simulate: the solver used all max_steps = {settings.max_steps} steps "
-        f"before t1 ({settings.method}); {steps_hint}.",
-        f"jaxunilat.simulate: the solution became non-finite (NaN or inf); {nonfinite_hint}.",
+        f"before t1 ({settings.method}); {hints['max_steps']}.",
+        f"jaxunilat.simulate: the solution became non-finite (NaN or inf); {hints['nonfinite']}.",
         f"jaxunilat.simulate: the {settings.method} solver failed (diffrax reported an error "
         "other than max_steps); pass throw=False to inspect the partial result.",
         f"jaxunilat.simulate: more than max_events = {settings.max_events} events (entries, exits, "
-        "apexes, deepest points); increase max_events or shorten the time span.",
+        f"apexes, deepest points); {hints['max_events']}.",
     ]
 
 
@@ -107,11 +121,51 @@ _FORWARD_ONLY = (
 )
 
 
-def _finish(ys, y1, status, settings, throw, ts, stats, events=None):
-    if throw:
-        ys = eqx.branched_error_if(
-            ys, status != Status.SUCCESS, jnp.maximum(status - 1, 0), _messages(settings)
+def _input_checks(model, y0, t0, t1, ts, settings: SolverSettings) -> list[tuple[str, Array]]:
+    """(message, valid) per run-time check of a solve's inputs, in the order they are
+    reported: what `simulate` and the model check on concrete values before compiling,
+    for traced ones (under `jax.jit`, `jax.vmap`, `jax.grad`). Each `valid` is a scalar
+    bool (per row under `jax.vmap`); all are evaluated once, before the solve."""
+    checks = list(model.runtime_checks())
+    checks.append(runtime_check("t0", t0, unit="s"))
+    checks.append(runtime_check("t1 - t0", t1 - t0, lo=0.0, lo_open=True, unit="s"))
+    checks.append(runtime_check("y0", y0))
+    checks.append(
+        (
+            "jaxunilat.simulate: ts must be sorted within [t0, t1] (traced values).",
+            jnp.all(jnp.diff(ts) >= 0) & (ts[0] >= t0) & (ts[-1] <= t1),
         )
+    )
+    checks.append(runtime_check("rtol", settings.rtol, lo=0.0, hi=1.0, lo_open=True))
+    checks.append(runtime_check("atol", settings.atol, lo=0.0, lo_open=True))
+    for name, value in (("dt", settings.dt), ("dtmax", settings.dtmax)):
+        if value is not None:
+            checks.append(runtime_check(name, value, lo=0.0, lo_open=True, unit="s"))
+    if settings.method == "rk4" and not settings.allow_coarse_dt:
+        limit = model.rk4_step_limit(jnp)
+        if limit is not None:
+            checks.append(
+                (
+                    "jaxunilat.simulate: dt is beyond rk4's stability limit for this contact, a tenth "
+                    "of the contact time t_c = pi/omega_d (the traced dt or parameters); decrease dt, "
+                    "or use solver='tsit5' or solver='event' (or pass allow_coarse_dt=True).",
+                    jnp.all(settings.dt <= limit[0]),
+                )
+            )
+    return checks
+
+
+def _finish(ys, y1, status, settings, throw, ts, stats, events=None, checks=()):
+    messages = _messages(settings)
+    reason = jnp.maximum(status - 1, 0)
+    if checks:
+        valid = jnp.stack([ok for _, ok in checks])
+        # The first failed check, reported instead of whatever the solve did with it.
+        reason = jnp.where(jnp.all(valid), reason, len(messages) + jnp.argmin(valid))
+        status = jnp.where(jnp.all(valid), status, Status.INVALID_INPUT).astype(jnp.int32)
+        messages = messages + [message for message, _ in checks]
+    if throw:
+        ys = eqx.branched_error_if(ys, status != Status.SUCCESS, reason, messages)
     if settings.autodiff == "forward":
         # A clear error instead of JAX's about transposing a while loop.
         ys, y1, events = eqxi.nondifferentiable_backward((ys, y1, events), msg=_FORWARD_ONLY)
@@ -129,6 +183,7 @@ def _finish(ys, y1, status, settings, throw, ts, stats, events=None):
 
 def _solve_impl(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[str, ...], throw: bool):
     _TRACES["simulate"] += 1
+    checks = _input_checks(model, y0, t0, t1, ts, settings)
     if settings.method == "event":
         ys, y1, done, nonfinite, overflow, stats, events = event_solve(
             model, y0, t0, t1, ts, settings, outputs
@@ -139,7 +194,7 @@ def _solve_impl(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[
             Status.NONFINITE,
             jnp.where(overflow, Status.EVENT_OVERFLOW, jnp.where(done, Status.SUCCESS, Status.MAX_STEPS)),
         ).astype(jnp.int32)
-        return _finish(ys, y1, status, settings, throw, ts, stats, events)
+        return _finish(ys, y1, status, settings, throw, ts, stats, events, checks)
 
     def save_fn(t, y, args):
         return {name: args.output(name, t, y) for name in outputs}
@@ -170,7 +225,7 @@ def _solve_impl(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[
         jnp.where(finite, Status.SUCCESS, Status.NONFINITE),
         jnp.where(steps, Status.MAX_STEPS, jnp.where(finite, Status.SOLVER_FAILED, Status.NONFINITE)),
     ).astype(jnp.int32)
-    return _finish(ys, y1, status, settings, throw, ts, sol.stats)
+    return _finish(ys, y1, status, settings, throw, ts, sol.stats, checks=checks)
 
 
 #: The compiled solve. Plain `jax.jit` (every leaf of a model or of the settings is an
@@ -229,6 +284,7 @@ def simulate(
     *,
     solver: str = "tsit5",
     dt: ArrayLike | None = None,
+    allow_coarse_dt: bool = False,
     rtol: ArrayLike = 1e-8,
     atol: ArrayLike = 1e-8,
     max_steps: int | None = None,
@@ -254,7 +310,11 @@ def simulate(
       model with every contact entry and exit located, integrated piecewise with
       Tsit5 at `rtol`, `atol`; correct gradients through impacts; needs
       `heaviside=Exact()`).
-    - `dt`: the RK4 step, s (for the adaptive methods: an optional first step).
+    - `dt`: the RK4 step, s (for the adaptive methods: an optional first step). RK4
+      refuses a step above the model's limit, a tenth of the contact time
+      (`model.rk4_step_limit()`): coarser steps lose or misplace contacts, and diverge.
+    - `allow_coarse_dt`: RK4 only: run such a step anyway, e.g. to reproduce the
+      paper's dt = 1 ms with its lost contacts.
     - `rtol`, `atol`: the adaptive methods' tolerances.
     - `max_steps`: the step budget (see `SolverSettings`).
     - `max_events`: the event mode's event buffer size.
@@ -296,26 +356,40 @@ def simulate(
             "lost; call jax.config.update('jax_enable_x64', True). float32 input arrays are fine: "
             "simulate casts them to float64."
         )
+    if isinstance(outputs, str):
+        raise InputTypeError(
+            f"outputs = {outputs!r} is a string; give a tuple of names from "
+            f"{', '.join(model.output_names)} (one name: outputs=({model.output_names[0]!r},))"
+        )
     outputs = tuple(outputs)
     if not outputs:
         raise ValueError("outputs = () is empty; request at least one of " + ", ".join(model.output_names))
     for name in outputs:
         check_choice("output", name, model.output_names)
-    y0 = as_float_array(y0)
+    y0 = as_float_array(real_number("y0", y0))
     if y0.shape != (len(model.state_names),):
         raise ValueError(
             f"y0 has shape {y0.shape}; expected ({len(model.state_names)},) for the state "
             f"({', '.join(model.state_names)})"
         )
     check_range("y0", y0)
+    if is_concrete(y0):
+        model.check_initial_state(y0)
     t0, t1 = _time_span(t_span)
     span = t1 - t0  # before the save times put t0 and t1 on the device
     if ts is None:
         if not isinstance(samples, (int, np.integer)) or samples < 2:
             raise ValueError(f"samples = {samples!r} is out of range; valid range is integers >= 2")
+        most = MAX_OUTPUT_BYTES // (8 * (len(outputs) + 1))
+        if samples > most:
+            raise ValueError(
+                f"samples = {samples!r} is out of range: the save times and {len(outputs)} outputs would "
+                f"take {8 * samples * (len(outputs) + 1) / 2**30:.3g} GiB; valid range is integers 2 to "
+                f"{most} (at most {MAX_OUTPUT_BYTES / 2**30:g} GiB)"
+            )
         t0, t1, ts = _default_times(t0, t1, int(samples))
     else:
-        ts = as_float_array(ts)
+        ts = as_float_array(real_number("ts", ts, unit="s"))
         if ts.ndim != 1 or ts.shape[0] < 1:
             raise ValueError(f"ts has shape {ts.shape}; expected a non-empty 1-D array of times in s")
         if is_concrete(ts) and is_concrete(t0) and is_concrete(t1):
@@ -333,6 +407,14 @@ def simulate(
         # Module, which costs more than the check itself (this runs on every call).
         if not hasattr(type(model), "switches"):
             raise ValueError(f"solver = 'event' is not supported for {type(model).__name__}")
+    if solver == "event" and isinstance(max_events, (int, np.integer)):
+        per_event = 8 * (_EVENT_COLUMNS + len(model.state_names))
+        if max_events > MAX_OUTPUT_BYTES // per_event:
+            raise ValueError(
+                f"max_events = {max_events!r} is out of range: the event buffer would take "
+                f"{max_events * per_event / 2**30:.3g} GiB; valid range is integers 1 to "
+                f"{MAX_OUTPUT_BYTES // per_event} (at most {MAX_OUTPUT_BYTES / 2**30:g} GiB)"
+            )
     settings = make_settings(
         solver,
         span,
@@ -345,5 +427,36 @@ def simulate(
         piece_solver=piece_solver,
         flight=flight,
         autodiff=autodiff,
+        allow_coarse_dt=allow_coarse_dt,
     )
+    if solver == "rk4" and not allow_coarse_dt:
+        _check_rk4_step(model, dt)
     return _run(model, y0, t0, t1, ts, settings, outputs, bool(throw))
+
+
+def _is_concrete_tree(tree) -> bool:
+    return all(is_concrete(leaf) for leaf in jax.tree_util.tree_leaves(tree))
+
+
+def _check_rk4_step(model, dt) -> None:
+    """Raise `ValueError` when a concrete RK4 step `dt` exceeds the model's limit
+    (traced values are checked at run time: `Status.INVALID_INPUT`)."""
+    if not (is_concrete(dt) and _is_concrete_tree(model)):
+        return
+    # On the host: NumPy copies of the leaves (no device dispatch per operation).
+    found = jax.tree_util.tree_map(np.asarray, model).rk4_step_limit(np)
+    if found is None:
+        return
+    limit, t_c = (float(v) for v in found)
+    step = float(np.max(np.asarray(dt)))
+    if not step > limit:
+        return
+    if math.isfinite(t_c) and limit == t_c / RK4_STEPS_PER_CONTACT:
+        why = f"a tenth of the contact time t_c = pi/omega_d = {t_c:.3g} s"
+    else:
+        why = "the time scale 1/|lambda| of the overdamped contact's fastest mode"
+    raise ValueError(
+        f"dt = {step:g} s is beyond rk4's stability limit for this contact; valid range is "
+        f"(0, {limit:.3g}] s ({why}); use dt <= {limit:.3g} s, or solver='tsit5' or solver='event' "
+        "(allow_coarse_dt=True runs it anyway, losing contacts)"
+    )

@@ -45,6 +45,16 @@ class RK4(dfx.AbstractERK):
 
 
 SOLVERS = ("rk4", "tsit5", "event")
+#: The step budget of the adaptive methods when `max_steps` is not given (RK4's covers
+#: the span: ⌈(t1 − t0)/dt⌉ + 16).
+DEFAULT_MAX_STEPS = {"tsit5": 200_000, "event": 16_384}
+#: The event mode's event buffer when `max_events` is not given.
+DEFAULT_MAX_EVENTS = 2048
+
+#: The largest step budget a solve may have: RK4 takes about 0.1 µs per step on a CPU
+#: core with loop kernels (seconds for 1e8 steps), the event mode ~1 µs; a larger budget
+#: is more likely a units slip (dt in ms, t1 in ms) than a run anyone waits for.
+MAX_STEPS_LIMIT = 100_000_000
 #: The automatic differentiation modes a solve supports (`SolverSettings.autodiff`).
 AUTODIFF = ("reverse", "forward")
 
@@ -78,6 +88,8 @@ class SolverSettings(eqx.Module):
       diffrax's `ForwardMode` for RK4 and Tsit5); reverse mode then raises. For a few
       parameters forward mode is the cheaper one: one tangent per parameter rides
       along with the solve. Static.
+    - `allow_coarse_dt`: RK4 only: accept a step above the model's limit (a tenth of
+      the contact time, `rk4_step_limit`), e.g. the paper's dt = 1 ms. Static.
     """
 
     method: str = eqx.field(static=True)
@@ -93,6 +105,7 @@ class SolverSettings(eqx.Module):
     piece_solver: str = eqx.field(static=True, default="tsit5")
     flight: str = eqx.field(static=True, default="closed")
     autodiff: str = eqx.field(static=True, default="reverse")
+    allow_coarse_dt: bool = eqx.field(static=True, default=False)
 
     def diffrax_solver(self):
         return RK4() if self.method == "rk4" else dfx.Tsit5()
@@ -107,6 +120,59 @@ class SolverSettings(eqx.Module):
         return dfx.ForwardMode() if self.autodiff == "forward" else dfx.RecursiveCheckpointAdjoint()
 
 
+def api_spelling(knob: str, value: str | None = None) -> str:
+    """How `simulate`'s keyword `knob` (set to `value`) is written in a hint."""
+    if knob == "span":
+        return "the time span"
+    return knob if value is None else f"{knob}={value!r}"
+
+
+def failure_hints(
+    method: str,
+    *,
+    piece_solver: str = "tsit5",
+    flight: str = "closed",
+    dtmax: bool = False,
+    spell=api_spelling,
+) -> dict[str, str]:
+    """What to change after a failure, naming only the knobs of `method`.
+
+    **Arguments:** the run's method and event-mode settings (`dtmax`: whether a step
+    cap was given), and
+    `spell(knob, value=None)`, how a knob is written: `api_spelling` (`max_steps`,
+    `piece_solver='dopri8'`), or the command line's flags.
+
+    **Returns:** a dict with a hint per failure: `"max_steps"` (the step budget ran
+    out), `"nonfinite"` (NaN or inf) and `"max_events"` (the event buffer is full).
+    """
+    span = spell("span")
+    tolerances = f"{spell('rtol')}/{spell('atol')}"
+    if method == "rk4":
+        steps = (
+            f"increase {spell('max_steps')} (to at least (t1 - t0)/dt) or {spell('dt')}, or shorten {span}"
+        )
+        nonfinite = (
+            f"the fixed step {spell('dt')} is probably beyond RK4's stability limit for this contact "
+            f"(contact time ~ pi*sqrt(m/kappa)); decrease {spell('dt')}, or use {spell('solver', 'tsit5')} "
+            f"or {spell('solver', 'event')}"
+        )
+    else:
+        cheaper = []
+        if method == "event" and piece_solver == "tsit5":
+            cheaper.append(f"{spell('piece_solver', 'dopri8')} (fewer steps at tolerances below ~1e-9)")
+        if method == "event" and flight == "integrated":
+            cheaper.append(f"{spell('flight', 'closed')} (one step per half flight)")
+        if method == "event" and dtmax:
+            cheaper.append(f"a larger {spell('dtmax')}")
+        steps = f"increase {spell('max_steps')}, loosen {tolerances}, " + (
+            f"use {', '.join(cheaper)}, " if cheaper else ""
+        )
+        steps += f"or shorten {span}"
+        nonfinite = f"check the parameters for NaN/inf, or tighten {tolerances}"
+    events = f"increase {spell('max_events')} or shorten {span}"
+    return {"max_steps": steps, "nonfinite": nonfinite, "max_events": events}
+
+
 #: Settings built from plain numbers, by their arguments, their arrays on the device:
 #: building an equinox Module costs ~0.15 ms, a tenth of a short event-mode call, and
 #: copying its arrays to the device on every call more (see `make_settings`).
@@ -118,6 +184,8 @@ def _plain(value):
     """A hashable stand-in for a plain number or None; `_UNCACHED` for anything else."""
     if value is None or isinstance(value, str):
         return value
+    if isinstance(value, (bool, np.bool_)):
+        return ("bool", bool(value))
     if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_)):
         return (type(value).__name__, float(value))
     if isinstance(value, np.ndarray) and value.shape == () and value.dtype.kind in "iuf":
@@ -153,24 +221,34 @@ def _build_settings(
     piece_solver: str = "tsit5",
     flight: str = "closed",
     autodiff: str = "reverse",
+    allow_coarse_dt: bool = False,
 ) -> SolverSettings:
     """Validate the solver arguments and build `SolverSettings`."""
     check_choice("solver", method, SOLVERS)
     check_range("rtol", rtol, lo=0.0, hi=1.0, lo_open=True)
     check_range("atol", atol, lo=0.0, lo_open=True)
     check_range("dt", dt, lo=0.0, lo_open=True, unit="s", allow_none=method != "rk4")
+    if method == "rk4" and is_concrete(dt) and is_concrete(span):
+        step = float(np.min(np.asarray(dt)))
+        needed = float(span) / step
+        if needed > MAX_STEPS_LIMIT:
+            raise ValueError(
+                f"dt = {step:g} s needs (t1 - t0)/dt = {needed:.3g} rk4 steps, more than "
+                f"{MAX_STEPS_LIMIT:.0e}; valid range for this time span is dt >= "
+                f"{float(span) / MAX_STEPS_LIMIT:.3g} s (or shorten the span, or use solver='tsit5' or 'event')"
+            )
     if max_steps is not None:
-        if not isinstance(max_steps, (int, np.integer)) or max_steps < 1:
-            raise ValueError(f"max_steps = {max_steps!r} is out of range; valid range is integers >= 1")
+        if not isinstance(max_steps, (int, np.integer)) or not 1 <= max_steps <= MAX_STEPS_LIMIT:
+            raise ValueError(
+                f"max_steps = {max_steps!r} is out of range; valid range is integers >= 1 and <= {MAX_STEPS_LIMIT:.0e}"
+            )
         max_steps = int(max_steps)
     elif method == "rk4":
         if not (is_concrete(dt) and is_concrete(span)):
             raise ValueError("max_steps must be given when dt or the time span is traced (rk4)")
         max_steps = int(math.ceil(float(span) / float(np.min(np.asarray(dt))))) + 16
-    elif method == "event":
-        max_steps = 16_384
     else:
-        max_steps = 200_000
+        max_steps = DEFAULT_MAX_STEPS[method]
     for name, value, low in (("max_events", max_events, 1), ("subgrid", subgrid, 1)):
         if not isinstance(value, (int, np.integer)) or value < low:
             raise ValueError(f"{name} = {value!r} is out of range; valid range is integers >= {low}")
@@ -197,4 +275,5 @@ def _build_settings(
         piece_solver=piece_solver,
         flight=flight,
         autodiff=autodiff,
+        allow_coarse_dt=bool(allow_coarse_dt),
     )

@@ -28,8 +28,63 @@ def as_float_array(value):
     return np.asarray(value, dtype=np.float64)
 
 
-def _values(value):
-    return np.asarray(value, dtype=float).ravel()
+class InputTypeError(TypeError, ValueError):
+    """A parameter of the wrong type: a string, a complex or boolean number, `None` or
+    another object where a real number (or an array of them) goes. Both a `TypeError`
+    and, for code that reports any bad input as a `ValueError`, a `ValueError`."""
+
+
+def real_number(name: str, value, *, unit: str = ""):
+    """Return `value` unchanged once it is known to hold real numbers.
+
+    Raises `InputTypeError` naming `name`, what was given and what is expected when
+    `value` is `None`, a string (even one like `"1e4"`: no silent parsing), complex,
+    boolean or not numeric at all. Arrays and tracers are checked by dtype; a sequence
+    that NumPy cannot take (e.g. a list of tracers) is left to the conversion.
+    """
+    expected = "a real number" + (f" in {unit}" if unit else "") + " or an array of them"
+    if isinstance(value, (jax.Array, jax.core.Tracer)):
+        kind = np.dtype(value.dtype).kind
+    elif value is None:
+        raise InputTypeError(f"{name} = None; give {expected}")
+    elif isinstance(value, (str, bytes)):
+        raise InputTypeError(f"{name} = {_short(value)} is a string; give {expected}, not text")
+    else:
+        try:
+            kind = np.asarray(value).dtype.kind
+        except Exception:  # e.g. a list holding tracers: jnp.asarray takes it
+            return value
+    what = {"c": "complex", "b": "boolean"}.get(kind, f"not numeric ({type(value).__name__})")
+    if kind not in "fiu":
+        raise InputTypeError(f"{name} = {_short(value)} is {what}; give {expected}")
+    return value
+
+
+def _short(value) -> str:
+    """A repr of `value` short enough for a one-line message."""
+    import reprlib
+
+    short = reprlib.Repr()
+    short.maxstring, short.maxother, short.maxlist, short.maxtuple = 40, 60, 6, 6
+    return short.repr(value)
+
+
+def float_field(name: str, unit: str = "", *, optional: bool = False):
+    """An equinox field converter to a float64 array whose type errors name `name`
+    (`optional`: `None` passes through, e.g. an absent wall or damping term)."""
+    import jax.numpy as jnp
+
+    def convert(value):
+        if value is None and optional:
+            return None
+        return jnp.asarray(real_number(name, value, unit=unit), dtype=float)
+
+    convert.__name__ = f"float_field_{name}"
+    return convert
+
+
+def _values(name, value):
+    return np.asarray(real_number(name, value), dtype=float).ravel()
 
 
 def check_finite(name: str, value, *, allow_none: bool = False) -> None:
@@ -40,9 +95,50 @@ def check_finite(name: str, value, *, allow_none: bool = False) -> None:
         raise ValueError(f"{name} must be given, got None")
     if not is_concrete(value):
         return
-    for v in _values(value):
+    for v in _values(name, value):
         if not math.isfinite(v):
             raise ValueError(f"{name} = {v} is not finite; it must be a finite number")
+
+
+def _range_text(lo, hi, lo_open, hi_open) -> str:
+    left = "(" if lo_open or lo is None else "["
+    right = ")" if hi_open or hi is None else "]"
+    lo_txt = "-inf" if lo is None else f"{lo:g}"
+    hi_txt = "inf" if hi is None else f"{hi:g}"
+    return f"{left}{lo_txt}, {hi_txt}{right}"
+
+
+def runtime_check(
+    name: str,
+    value,
+    *,
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+    hi_open: bool = False,
+    unit: str = "",
+) -> tuple[str, jax.Array]:
+    """The run-time twin of `check_range` for a traced value: `(message, valid)`.
+
+    `valid` is a scalar bool array, true when every entry of `value` is finite and
+    within the bounds; `message` names `name` and the valid range. `simulate` turns a
+    false `valid` into `Status.INVALID_INPUT` (and, with `throw=True`, an error with
+    `message`).
+    """
+    import jax.numpy as jnp
+
+    v = jnp.asarray(value)
+    ok = jnp.isfinite(v)
+    if lo is not None:
+        ok = ok & ((v > lo) if lo_open else (v >= lo))
+    if hi is not None:
+        ok = ok & ((v < hi) if hi_open else (v <= hi))
+    suffix = f" {unit}" if unit else ""
+    message = (
+        f"jaxunilat.simulate: {name} is out of range (a traced value); valid range is "
+        f"{_range_text(lo, hi, lo_open, hi_open)}{suffix}, finite."
+    )
+    return message, jnp.all(ok)
 
 
 def check_range(
@@ -69,13 +165,9 @@ def check_range(
     check_finite(name, value, allow_none=allow_none)
     if value is None or not is_concrete(value):
         return
-    left = "(" if lo_open or lo is None else "["
-    right = ")" if hi_open or hi is None else "]"
-    lo_txt = "-inf" if lo is None else f"{lo:g}"
-    hi_txt = "inf" if hi is None else f"{hi:g}"
-    rng = f"{left}{lo_txt}, {hi_txt}{right}"
+    rng = _range_text(lo, hi, lo_open, hi_open)
     suffix = f" {unit}" if unit else ""
-    for v in _values(value):
+    for v in _values(name, value):
         bad = False
         if lo is not None and (v < lo or (lo_open and v == lo)):
             bad = True
@@ -83,6 +175,12 @@ def check_range(
             bad = True
         if bad:
             raise ValueError(f"{name} = {v:g}{suffix} is out of range; valid range is {rng}{suffix}")
+
+
+def check_type(name: str, value, cls: type, expected: str) -> None:
+    """Raise `InputTypeError` naming `name` unless `value` is an instance of `cls`."""
+    if not isinstance(value, cls):
+        raise InputTypeError(f"{name} = {value!r} ({type(value).__name__}) is not supported; give {expected}")
 
 
 def check_choice(name: str, value, choices) -> None:

@@ -35,7 +35,7 @@ def tsit5(model, y0, t1, *, tol=TOL, ts=None, throw=True):
     )
 
 
-def rk4(model, y0, t1, dt):
+def rk4(model, y0, t1, dt, **kwargs):
     """Classic RK4 with the shared outputs, sample count and step budget (throw=False)."""
     return jaxunilat.simulate(
         model,
@@ -47,6 +47,7 @@ def rk4(model, y0, t1, dt):
         samples=SAMPLES,
         outputs=OUTPUTS,
         throw=False,
+        **kwargs,
     )
 
 

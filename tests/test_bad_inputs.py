@@ -81,6 +81,21 @@ API = [
     ("ts unsorted", lambda: _sim(ts=[0.05, 0.01]), ["ts", "sorted"]),
     ("ts beyond t1", lambda: _sim(ts=[0.0, 0.5]), ["ts", "[0, 0.1]"]),
     ("not a model", lambda: ju.simulate("ball", Y0, 1.0), ["model", "'ball'"]),
+    (
+        "x0 inside upper wall",
+        lambda: _sim(y0=[1.0, 0.0]),
+        ["x0 = 1 m", "[-0.4, 0.4] m", "0.6 m inside the upper"],
+    ),
+    ("x0 inside lower wall", lambda: _sim(y0=[-0.41, 0.0]), ["x0 = -0.41 m", "[-0.4, 0.4] m", "lower"]),
+    # Work and memory estimated before compiling: hours of RK4 steps, outputs of many GiB.
+    (
+        "rk4 steps 2e11",
+        lambda: _sim(solver="rk4", dt=1e-11, t1=2.0),
+        ["dt = 1e-11", "2e+11", "dt >= 2e-08 s"],
+    ),
+    ("samples 1e10", lambda: _sim(samples=10**10), ["samples = 10000000000", "GiB", "2 to 268435456"]),
+    ("max_events 1e9", lambda: _sim(solver="event", max_events=10**9), ["max_events = 1000000000", "GiB"]),
+    ("max_steps 1e9", lambda: _sim(max_steps=10**9), ["max_steps = 1000000000", "<= 1e+08"]),
 ]
 
 
@@ -88,6 +103,41 @@ API = [
 def test_api_bad_input_names_parameter_value_and_range(label, call, parts):
     with pytest.raises(ValueError) as info:
         call()
+    message = str(info.value)
+    for part in parts:
+        assert part in message, (label, message)
+
+
+# (label, callable, substrings): a wrong type raises TypeError (also a ValueError) naming the parameter
+TYPES = [
+    ("kappa text", lambda: ju.Ball(kappa="abc"), ["kappa = 'abc'", "string", "real number in N/m"]),
+    ("kappa numeric text", lambda: ju.Ball(kappa="1e4"), ["kappa = '1e4'", "string"]),
+    ("kappa complex", lambda: ju.Ball(kappa=1e4 + 1j), ["kappa = (10000+1j)", "complex"]),
+    ("kappa None", lambda: ju.Ball(kappa=None), ["kappa = None"]),
+    ("mass object", lambda: _ball(mass=object()), ["mass = <object", "not numeric"]),
+    ("k_r boolean", lambda: _ball(k_r=True), ["k_r = True", "boolean"]),
+    ("coupling alpha text", lambda: ju.Coupling.table2(6, alpha="x"), ["alpha = 'x'", "string"]),
+    ("eps text", lambda: ju.Logistic("x"), ["eps = 'x'", "string"]),
+    ("law text", lambda: _ball(law="kv"), ["law = 'kv'", "KelvinVoigt()"]),
+    ("heaviside text", lambda: _ball(heaviside="exact"), ["heaviside = 'exact'", "Exact()"]),
+    ("outputs text", lambda: _sim(outputs="xv"), ["outputs = 'xv'", "tuple of names", "outputs=('x',)"]),
+    ("y0 text", lambda: _sim(y0="ab"), ["y0 = 'ab'", "string"]),
+    ("y0 complex", lambda: _sim(y0=[-0.4 + 1j, 0.0]), ["y0 = [(-0.4+1j), 0.0]", "complex"]),
+    ("t1 text", lambda: _sim(t1="1"), ["t1 = '1'", "string"]),
+    ("t_span text", lambda: _sim(t1=(0.0, "1")), ["t1 = '1'", "string"]),
+    ("dt text", lambda: _sim(solver="rk4", dt="1e-5"), ["dt = '1e-5'", "string"]),
+    ("rtol complex", lambda: _sim(rtol=1e-8j), ["rtol = 1e-08j", "complex"]),
+    ("ts text", lambda: _sim(ts="abc"), ["ts = 'abc'", "string"]),
+    ("contact_time text", lambda: ju.contact_time("a", 0.2, 1.0), ["kappa = 'a'", "string"]),
+    ("ball_state text", lambda: ju.ball_state("a", 0.0), ["x0 = 'a'", "string"]),
+]
+
+
+@pytest.mark.parametrize("label, call, parts", TYPES, ids=[a[0] for a in TYPES])
+def test_api_wrong_type_names_parameter_and_value(label, call, parts):
+    with pytest.raises(TypeError) as info:
+        call()
+    assert isinstance(info.value, ValueError)  # code that reports bad input as ValueError sees it
     message = str(info.value)
     for part in parts:
         assert part in message, (label, message)
@@ -153,6 +203,15 @@ CLI = [
     (["simulate", "ball", "--k-r", "-0.2"], "k_r = -0.2"),
     (["simulate", "ball", "--v0", "inf"], "v0 = inf"),
     (["simulate", "ball", "--solver", "kvaerno5"], "kvaerno5"),
+    (["simulate", "ball", "--x0", "1"], "x0 = 1 m is out of range; valid range is [-0.4, 0.4] m"),
+    (["simulate", "ball", "--gap", "0.5", "--x0", "-0.3"], "valid range is [-0.25, 0.25] m"),
+    (["simulate", "ball", "--solver", "rk4", "--dt", "1e-11", "--t1", "2"], "dt >= 2e-08 s"),
+    (["simulate", "ball", "--samples", "10000000000"], "samples = 10000000000"),
+    (["simulate", "ball", "--samples", "1e10"], "samples = 10000000000"),
+    (["simulate", "ball", "--samples", "2.5"], "invalid count '2.5'"),
+    (["simulate", "coupling", "--t1", "1e6"], "t1 = 1e+06 s is out of range for --solver event"),
+    (["simulate", "coupling", "--solver", "rk4", "--dt", "1e-9", "--t1", "1000"], "dt >= 1e-05 s"),
+    (["simulate", "coupling", "--samples", "1e10"], "samples = 10000000000"),
     (["simulate", "ball", "--events", "{tmp}/e.csv"], "--events needs --solver event"),
     (["simulate", "ball", "--out", "{tmp}/a.csv", "--plot", "{tmp}/a.csv"], "name the same file"),
     (["simulate", "ball", "--out", "{tmp}"], "directory"),
@@ -245,3 +304,16 @@ def test_good_inputs_are_never_modified(tmp_path, capsys):
     capsys.readouterr()
     assert _digest(data) == before
     assert _digest(fit) == fit_before
+
+
+def test_start_at_a_wall_or_resting_in_contact_is_allowed():
+    """The paper's start (exactly at the lower wall) and a ball resting in contact (sunk by
+    its static sag m g / kappa) pass; one sag-tolerance deeper does not."""
+    ball = _ball()
+    sag = 2.37e-3 * 9.81 / 1e4
+    for x0 in (-0.4, 0.4, 0.0, -0.4 - sag, -0.4 - 9.9 * sag):
+        ball.check_initial_state(np.array([x0, 0.0]))
+    with pytest.raises(ValueError, match="x0 = -0.40023"):
+        ball.check_initial_state(np.array([-0.4 - 100 * sag, 0.0]))
+    # One wall only: anywhere above the floor.
+    ju.Ball.table1(2, upper=None).check_initial_state(np.array([5.0, 0.0]))

@@ -129,11 +129,13 @@ def test_output_path_checks(tmp_path, capsys):
     assert code == 2 and "does not exist" in err
 
 
-def test_unstable_rk4_is_a_clear_runtime_error(tmp_path, capsys):
+@pytest.mark.parametrize("dt", ["5", "1e-3", "3e-3"])
+def test_rk4_beyond_its_step_limit_is_refused(dt, tmp_path, capsys):
+    """Before: exit 0 with x(t1) = -1.2e14 m (dt 5 s), or contacts silently lost (1e-3 s)."""
     csv = tmp_path / "x.csv"
-    code, _, err = _run(["simulate", "ball", "--solver", "rk4", "--dt", "3e-3", "--out", str(csv)], capsys)
-    assert code == 1
-    assert len(err.strip().splitlines()) == 1 and "--dt" in err
+    code, _, err = _run(["simulate", "ball", "--solver", "rk4", "--dt", dt, "--out", str(csv)], capsys)
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1 and f"dt = {float(dt):g} s" in err and "0.000153" in err
     assert not csv.exists()
 
 
@@ -199,3 +201,141 @@ def test_events_output_path_checks(tmp_path, capsys):
     same = str(tmp_path / "same.csv")
     code, _, err = _run([*base, "--out", same, "--events", same], capsys)
     assert code == 2 and "same file" in err and len(err.strip().splitlines()) == 1
+
+
+_FOREVER = """
+import sys
+import jax, jax.numpy as jnp
+import jaxunilat._simulate as engine
+from jaxunilat._cli import main
+
+def forever(*args, **kwargs):  # a compiled solve that never returns
+    print("solving", flush=True)
+    loop = jax.jit(lambda x: jax.lax.while_loop(lambda c: c >= 0, lambda c: c + 1.0, x))
+    return loop(jnp.float64(0.0)).block_until_ready()
+
+engine.simulate = forever
+sys.exit(main(["simulate", "ball", "--samples", "11"]))
+"""
+
+
+def test_ctrl_c_interrupts_a_compiled_solve():
+    """Ctrl-C inside a compiled computation: one line and exit 130 at once, not a hang
+    until the computation ends (here: never)."""
+    import signal
+    import time
+
+    env = dict(os.environ, MPLBACKEND="Agg")
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _FOREVER], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env
+    )
+    try:
+        assert proc.stdout.readline() == "solving\n"
+        time.sleep(0.5)  # into the compiled loop (an earlier signal ends it the same way)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err
+    ours = [line for line in err.splitlines() if line.startswith("jaxunilat:")]
+    assert ours == ["jaxunilat: error: interrupted"], err
+
+
+# -- solver knobs and failure hints ----------------------------------------------------------
+
+
+class _Recorder:
+    """Stands in for `simulate`: records its keywords, returns a failed run."""
+
+    def __init__(self, status):
+        self.kwargs, self.status = None, status
+
+    def __call__(self, model, y0, t1, **kwargs):
+        import types
+
+        self.kwargs = kwargs
+        return types.SimpleNamespace(status=self.status)
+
+
+@pytest.mark.parametrize("model", ["ball", "coupling"])
+def test_solver_knob_flags_reach_simulate(model, monkeypatch, capsys):
+    import jaxunilat._simulate as engine
+    from jaxunilat import Status
+
+    record = _Recorder(Status.MAX_STEPS)
+    monkeypatch.setattr(engine, "simulate", record)
+    argv = ["simulate", model, "--solver", "event", "--t1", "1", "--max-steps", "1e3", "--max-events", "64"]
+    code, _, err = _run([*argv, "--piece-solver", "dopri8", "--flight", "integrated"], capsys)
+    assert code == 1
+    kw = record.kwargs
+    assert (kw["max_steps"], kw["max_events"], kw["piece_solver"], kw["flight"]) == (
+        1000,
+        64,
+        "dopri8",
+        "integrated",
+    )
+    # The hint names this run's budget and only the event mode's knobs, as flags.
+    line = err.strip()
+    assert "--max-steps = 1000" in line and "--rtol/--atol" in line and "--flight closed" in line
+    assert "--piece-solver dopri8" not in line and "--dt" not in line  # already dopri8; no rk4 advice
+
+
+@pytest.mark.parametrize(
+    "solver, status, present, absent",
+    [
+        (
+            "event",
+            "MAX_STEPS",
+            ["--max-steps = 16384", "--piece-solver dopri8", "--t1"],
+            ["--flight", "--dt"],
+        ),
+        ("tsit5", "MAX_STEPS", ["--max-steps = 200000", "--rtol/--atol"], ["--piece-solver", "--flight"]),
+        ("rk4", "MAX_STEPS", ["--max-steps = 200016", "--dt"], ["--rtol", "--piece-solver"]),
+        ("event", "EVENT_OVERFLOW", ["--max-events = 2048", "increase --max-events"], ["--max-steps"]),
+        ("tsit5", "NONFINITE", ["tighten --rtol/--atol"], ["--piece-solver", "--dt"]),
+    ],
+)
+def test_ball_failure_hint_lists_the_knobs_of_the_solver_used(
+    solver, status, present, absent, monkeypatch, capsys
+):
+    import jaxunilat._simulate as engine
+    from jaxunilat import Status
+
+    monkeypatch.setattr(engine, "simulate", _Recorder(Status[status]))
+    code, _, err = _run(["simulate", "ball", "--solver", solver, "--t1", "2"], capsys)
+    assert code == 1 and len(err.strip().splitlines()) == 1
+    for part in present:
+        assert part in err, err
+    for part in absent:
+        assert part not in err, err
+
+
+@pytest.mark.parametrize(
+    "argv, flag",
+    [
+        (["simulate", "ball", "--solver", "tsit5", "--flight", "closed"], "--flight"),
+        (
+            ["simulate", "ball", "--solver", "rk4", "--dt", "1e-5", "--piece-solver", "dopri8"],
+            "--piece-solver",
+        ),
+        (["simulate", "coupling", "--solver", "tsit5", "--max-events", "10"], "--max-events"),
+    ],
+)
+def test_event_knobs_need_the_event_solver(argv, flag, capsys):
+    code, _, err = _run(argv, capsys)
+    assert code == 2 and f"{flag} applies to --solver event only" in err
+
+
+def test_api_failure_hints_follow_the_solver():
+    from jaxunilat._simulate import _messages
+    from jaxunilat._solvers import make_settings
+
+    event = _messages(make_settings("event", 1.0, flight="integrated", dtmax=0.01))[0]
+    for part in ("max_steps = 16384", "piece_solver='dopri8'", "flight='closed'", "a larger dtmax"):
+        assert part in event, event
+    dopri = _messages(make_settings("event", 1.0, piece_solver="dopri8"))[0]
+    assert "piece_solver" not in dopri and "flight" not in dopri and "dtmax" not in dopri
+    rk4 = _messages(make_settings("rk4", 1.0, dt=1e-5))
+    assert "rtol" not in rk4[0] and "increase max_steps" in rk4[0] and "decrease dt" in rk4[1]
+    tsit5 = _messages(make_settings("tsit5", 1.0))[0]
+    assert "loosen rtol/atol" in tsit5 and "piece_solver" not in tsit5

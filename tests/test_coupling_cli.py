@@ -41,7 +41,7 @@ def test_simulate_coupling_bad_input(tmp_path, capsys):
     assert main(["simulate", "coupling", "--params", "soft"]) == 2
     assert main(["simulate", "coupling", "--h", "-1"]) == 2
     assert "h = -1" in capsys.readouterr().err
-    # RK4 beyond its stability limit 2.78/omega_c (omega_c = 255 rad/s under the stiff constants).
+    # RK4 beyond its step limit, a tenth of the contact time (1.25 ms under the stiff constants).
     assert main(["simulate", "coupling", "--solver", "rk4", "--dt", "0.02"]) == 2
     assert "stability limit" in capsys.readouterr().err
     assert main(["simulate", "coupling", "--out", str(tmp_path / "missing" / "x.csv")]) == 2
@@ -55,3 +55,14 @@ def test_literal_warns_on_stderr(capsys, tmp_path):
     )
     assert code == 0
     assert "physically absurd" in capsys.readouterr().err
+
+
+def test_solver_failure_inside_a_compiled_run_is_one_line(capsys, caplog):
+    """A failure raised from the compiled run (throw=True) reaches stderr as one line, without
+    the traceback JAX logs for the host callback that carries it."""
+    code = main(["simulate", "coupling", "--t1", "0.5", "--samples", "11", "--max-steps", "50"])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert "max_steps = 50" in err
+    assert not [r for r in caplog.records if r.levelname in ("ERROR", "CRITICAL")], caplog.text

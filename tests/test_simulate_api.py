@@ -4,6 +4,7 @@ import os
 import subprocess
 import sys
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -96,13 +97,82 @@ def test_grad_through_smooth_heaviside_matches_finite_difference():
 
 
 def test_rk4_beyond_stability_reports_nonfinite():
-    sol = rk4(jaxunilat.Ball.table1(2), PAPER_Y0, 2.0, 3e-3)
+    """A law with no known step limit (Hunt-Crossley): RK4 diverges, status NONFINITE."""
+    ball = jaxunilat.Ball(kappa=1e6, k_r=None, law=jaxunilat.HuntCrossley(1.5))
+    sol = rk4(ball, PAPER_Y0, 2.0, 3e-3)
     assert int(sol.status) == jaxunilat.Status.NONFINITE
     assert not sol.ok
     with pytest.raises(RuntimeError, match="dt"):
-        jaxunilat.simulate(
-            jaxunilat.Ball.table1(2), PAPER_Y0, 2.0, solver="rk4", dt=3e-3, samples=2, outputs=("x",)
+        jaxunilat.simulate(ball, PAPER_Y0, 2.0, solver="rk4", dt=3e-3, samples=2, outputs=("x",))
+
+
+def test_rk4_step_limit_is_a_tenth_of_the_contact_time():
+    """The limit against the damped oscillator's half period, written out here."""
+    kappa, k_r, m = 1e4, 0.2, 2.37e-3
+    zeta = k_r / (2 * np.sqrt(kappa * m))
+    t_c = np.pi / (np.sqrt(kappa / m) * np.sqrt(1 - zeta**2))
+    limit, contact = jaxunilat.Ball.table1(2).rk4_step_limit(np)
+    assert contact == pytest.approx(t_c, rel=1e-14) and limit == pytest.approx(t_c / 10, rel=1e-14)
+    # Overdamped (zeta = 2): no contact time; the fastest mode's time scale instead.
+    over = jaxunilat.Ball(kappa=kappa, k_r=4 * np.sqrt(kappa * m), mass=m)
+    limit, contact = over.rk4_step_limit(np)
+    assert contact == np.inf
+    assert limit == pytest.approx(1 / (np.sqrt(kappa / m) * (2 + np.sqrt(3))), rel=1e-14)
+
+
+def test_rk4_at_its_step_limit_keeps_every_contact(ref_ex2):
+    """At the largest step accepted, RK4 still follows the reference within 2 cm over 2 s."""
+    ball = jaxunilat.Ball.table1(2)
+    limit = float(ball.rk4_step_limit(np)[0])
+    sol = rk4(ball, PAPER_Y0, 2.0, limit)
+    assert sol.ok
+    ref_x, _ = ref_ex2(np.asarray(sol.ts))
+    assert np.max(np.abs(np.asarray(sol["x"]) - ref_x)) < 0.02
+
+
+@pytest.mark.parametrize("dt", [5.0, 1e-3, 2e-4])
+def test_rk4_beyond_its_step_limit_is_refused(dt):
+    """Concrete values: a ValueError before compiling, naming dt, its value and the limit."""
+    with pytest.raises(ValueError) as info:
+        rk4(jaxunilat.Ball.table1(2), PAPER_Y0, 2.0, dt)
+    message = str(info.value)
+    for part in (f"dt = {dt:g} s", "valid range is (0, 0.000153] s", "t_c = pi/omega_d = 0.00153 s", "tsit5"):
+        assert part in message, message
+
+
+def test_rk4_coarse_step_runs_when_allowed_explicitly():
+    """The paper's dt = 1 ms, knowingly: it runs (and, as in the paper, loses upper contacts)."""
+    sol = rk4(jaxunilat.Ball.table1(2), PAPER_Y0, 2.0, 1e-3, allow_coarse_dt=True)
+    assert sol.ok
+    x = np.asarray(sol["x"])
+    assert np.all(np.isfinite(x)) and np.count_nonzero(np.diff((x > 0.4).astype(int)) == 1) < 3
+
+
+def test_rk4_beyond_its_step_limit_traced_is_a_failed_status():
+    """Traced dt or parameters: status INVALID_INPUT (throw=False), or an error naming dt."""
+    ball = jaxunilat.Ball.table1(2)
+
+    def run(dt, kappa, throw=False):
+        return jaxunilat.simulate(
+            eqx.tree_at(lambda b: b.kappa, ball, jnp.asarray(kappa, float)),
+            PAPER_Y0,
+            0.1,
+            solver="rk4",
+            dt=dt,
+            max_steps=2_000,
+            samples=2,
+            outputs=("x",),
+            throw=throw,
         )
+
+    status = jax.jit(lambda dt, kappa: run(dt, kappa).status)
+    assert int(status(1e-4, 1e4)) == jaxunilat.Status.SUCCESS
+    assert int(status(1e-3, 1e4)) == jaxunilat.Status.INVALID_INPUT
+    assert int(status(1e-4, 1e6)) == jaxunilat.Status.INVALID_INPUT  # stiffer: limit 1.5e-5 s
+    batch = jax.vmap(status)(jnp.array([1e-4, 1e-3, 5e-5]), jnp.array([1e4, 1e4, 1e6]))
+    assert batch.tolist() == [0, jaxunilat.Status.INVALID_INPUT, jaxunilat.Status.INVALID_INPUT]
+    with pytest.raises(RuntimeError, match="dt is beyond rk4's stability limit"):
+        jax.block_until_ready(jax.jit(lambda dt: run(dt, 1e4, throw=True).ys["x"])(1e-3))
 
 
 def test_tiny_max_steps_reports_max_steps():
