@@ -24,7 +24,8 @@ INPUT_FLAGS: set[tuple[tuple[str, ...], str]] = set()
 OUTPUT_DESTS = {"out", "json", "plot", "events"}
 _PATHLIKE = re.compile(r"^(DIR|[A-Z_]+\.[a-z0-9]+)$")
 
-#: Per command: the arguments before the outputs ("{NAME}" stands for the input file
+#: Per command: the arguments before the outputs ("{NAME}" stands for the input file; a
+#: required output comes first and the flag under test, given last, overrides it)
 #: NAME), the inputs (NAME -> how to make it) and which output flags are directories.
 COMMANDS = {
     ("simulate", "ball"): dict(argv=["--solver", "event"], inputs={}),
@@ -33,8 +34,13 @@ COMMANDS = {
     ("qualify",): dict(argv=["{FIT}"], inputs={"FIT": "fit.json"}),
     ("reproduce",): dict(argv=["--quick"], inputs={}, dirs={"--out"}),
     ("bench",): dict(argv=["--size", "tiny"], inputs={}, dirs={"--out"}),
-    # Added by a sibling branch: its rows run once the subcommand is registered.
-    ("import",): dict(argv=["{SOURCE}"], inputs={"SOURCE": "drop_impacts.csv"}),
+    ("import", "wav"): dict(argv=["{SOURCE}", "--out", "imported.csv"], inputs={"SOURCE": "phone_drop.wav"}),
+    ("import", "phyphox"): dict(
+        argv=["{SOURCE}", "--out", "imported.csv"], inputs={"SOURCE": "phyphox_drop_10cm.csv"}
+    ),
+    ("import", "video"): dict(
+        argv=["{SOURCE}", "--out", "imported.csv"], inputs={"SOURCE": "drop_trace.csv"}
+    ),
 }
 
 
@@ -92,6 +98,10 @@ def test_the_walk_finds_the_known_outputs():
         (("qualify",), "--json"),
         (("reproduce",), "--out"),
         (("bench",), "--out"),
+        (("import", "wav"), "--out"),
+        (("import", "wav"), "--plot"),
+        (("import", "phyphox"), "--out"),
+        (("import", "video"), "--out"),
     ]:
         assert known in FLAGS, known
 
