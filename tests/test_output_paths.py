@@ -24,9 +24,9 @@ INPUT_FLAGS: set[tuple[tuple[str, ...], str]] = set()
 OUTPUT_DESTS = {"out", "json", "plot", "events"}
 _PATHLIKE = re.compile(r"^(DIR|[A-Z_]+\.[a-z0-9]+)$")
 
-#: Per command: the arguments before the outputs ("{NAME}" stands for the input file; a
-#: required output comes first and the flag under test, given last, overrides it)
-#: NAME), the inputs (NAME -> how to make it) and which output flags are directories.
+#: Per command: the arguments before the outputs ("{NAME}" stands for the input file
+#: NAME; a required output may come here: the flag under test, given last, overrides it),
+#: the inputs (NAME -> how to make it) and which output flags are directories.
 COMMANDS = {
     ("simulate", "ball"): dict(argv=["--solver", "event"], inputs={}),
     ("simulate", "coupling"): dict(argv=[], inputs={}),
