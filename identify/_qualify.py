@@ -195,13 +195,32 @@ def _rebound_fn(has_drag: bool):
     return fn
 
 
-def _heights(kappas, k_rs, *, mass, gravity, drag, drop) -> np.ndarray:
+def _heights(kappas, k_rs, *, mass, gravity, drag, drop, statuses: list | None = None) -> np.ndarray:
+    """Rebound heights (NaN where none); each run's status is appended to `statuses`."""
     fn = _rebound_fn(drag > 0)
     out = np.empty(len(kappas))
     for i, (kappa, k_r) in enumerate(zip(kappas, k_rs, strict=True)):
         h, status = fn(*(np.float64(v) for v in (kappa, k_r, mass, gravity, drag, drop)))
         out[i] = float(h) if int(status) == 0 else math.nan
+        if statuses is not None:
+            statuses.append(int(status))
     return out
+
+
+def _no_rebound(kappa, k_r, drop, status: int) -> ValueError:
+    """The error for a test run with no rebound height, naming its real cause."""
+    if status != 0:
+        import jaxunilat
+
+        name = jaxunilat.Status(status).name
+        return ValueError(
+            f"the simulated drop from drop = {drop:g} m failed ({name}) before the first rebound apex; "
+            "a rebound test drops from centimetres to a few metres: check drop (m), mass (kg) and gravity"
+        )
+    return ValueError(
+        f"kappa = {kappa:g} N/m, k_r = {k_r:g} N*s/m: the ball does not rebound (overdamped contact); "
+        "no rebound height"
+    )
 
 
 def rebound_height(
@@ -227,12 +246,10 @@ def rebound_height(
     _check_test(mass=mass, drop=drop, drag=drag, gravity=gravity)
     check_range("kappa", kappa, lo=0.0, lo_open=True, unit="N/m")
     check_range("k_r", k_r, lo=0.0, unit="N*s/m")
-    (h,) = _heights([kappa], [k_r], mass=mass, gravity=gravity, drag=drag, drop=drop)
+    statuses: list = []
+    (h,) = _heights([kappa], [k_r], mass=mass, gravity=gravity, drag=drag, drop=drop, statuses=statuses)
     if not math.isfinite(h):
-        raise ValueError(
-            f"kappa = {kappa:g} N/m, k_r = {k_r:g} N*s/m: the ball does not rebound "
-            "(overdamped contact, or the simulation failed); no rebound height"
-        )
+        raise _no_rebound(kappa, k_r, drop, statuses[0])
     return h
 
 
@@ -265,12 +282,11 @@ def _from_restitution(e, t_c, mass):
     return mass * (np.pi**2 + le**2) / t_c**2, -2.0 * mass * le / t_c
 
 
-def _finish(height, draws, *, limits, test, kappa, k_r, uncertainty, samples, seed, tc_sensitivity, notes):
+def _finish(
+    height, draws, *, limits, test, kappa, k_r, uncertainty, samples, seed, tc_sensitivity, notes, status=0
+):
     if not math.isfinite(height):
-        raise ValueError(
-            f"kappa = {kappa:g} N/m, k_r = {k_r:g} N*s/m: the ball does not rebound "
-            "(overdamped contact, or the simulation failed); no rebound height"
-        )
+        raise _no_rebound(kappa, k_r, test["drop"], status)
     if draws is None:
         stderr, ci = 0.0, (height, height)
     else:
@@ -349,8 +365,11 @@ def qualify(
     check_range("k_r", k_r, lo=0.0, lo_open=stderr is not None, unit="N*s/m")
     test = dict(mass=float(mass), drop=float(drop), drag=float(drag), gravity=float(gravity))
     limits = (float(min_height), float(max_height))
-    (height,) = _heights([kappa], [k_r], **_sim(test))
-    common = dict(limits=limits, test=test, kappa=kappa, k_r=k_r, tc_sensitivity=None, notes=())
+    statuses: list = []
+    (height,) = _heights([kappa], [k_r], **_sim(test), statuses=statuses)
+    common = dict(
+        limits=limits, test=test, kappa=kappa, k_r=k_r, tc_sensitivity=None, notes=(), status=statuses[0]
+    )
     if stderr is None or (stderr[0] == 0 and stderr[1] == 0):
         return _finish(height, None, uncertainty="none (exact parameters)", samples=0, seed=None, **common)
     if len(stderr) != 2:

@@ -294,3 +294,11 @@ def test_qualify_fit_refuses_a_damaged_or_foreign_fit():
         qualify_fit(no_verdicts)
     with pytest.raises(ValueError, match="law = 'hunt-crossley'"):
         qualify_fit(fit_json(law="hunt-crossley"))
+
+
+def test_a_failed_test_run_names_the_drop_not_the_contact(capsys):
+    """A drop the solver cannot finish is not blamed on κ and k_r; an overdamped contact is."""
+    code, _, err = _run(capsys, "--kappa", str(TRUTH[0]), "--k-r", str(TRUTH[1]), "--drop", "1e6")
+    assert code == 2 and "drop = 1e+06 m failed" in err and "kappa" not in err
+    with pytest.raises(ValueError, match=r"does not rebound \(overdamped contact\)"):
+        rebound_height(1e4, 20.0)
