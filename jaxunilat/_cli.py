@@ -521,7 +521,10 @@ def main(argv: list[str] | None = None) -> int:
         return _fail(str(err), EXIT_RUNTIME)
     except RuntimeError as err:  # EquinoxRuntimeError / JaxRuntimeError from the solver
         text = str(err)
-        ours = [line for line in text.splitlines() if "jaxunilat" in line]
+        # The solver's own message ("jaxunilat.simulate: ..."), wherever a wrapper put it
+        # (equinox prefixes its class name; JAX puts the traced stack first), never a
+        # traceback's file path.
+        ours = [m.group(0) for m in re.finditer(r"\bjaxunilat\.\w+: [^\n]*", text)]
         return _fail((ours or text.splitlines() or [type(err).__name__])[0], EXIT_RUNTIME)
     except KeyboardInterrupt:
         return _fail("interrupted", EXIT_INTERRUPTED)

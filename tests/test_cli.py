@@ -339,3 +339,30 @@ def test_api_failure_hints_follow_the_solver():
     assert "rtol" not in rk4[0] and "increase max_steps" in rk4[0] and "decrease dt" in rk4[1]
     tsit5 = _messages(make_settings("tsit5", 1.0))[0]
     assert "loosen rtol/atol" in tsit5 and "piece_solver" not in tsit5
+
+
+def test_a_solver_failure_inside_a_transformation_prints_its_own_message(capsys, monkeypatch):
+    """A run that fails inside jit/jacrev reaches the command line wrapped (equinox's class
+    name first, JAX's traced stack with file paths before it): the one line printed is
+    the solver's message, never a traceback's file path."""
+    import jaxunilat._sensitivity as sensitivity
+    from jaxunilat._cli import main
+
+    wrapped = (
+        "Above is the stack outside of JIT. Below is the stack inside of JIT:\n"
+        '  File "/somewhere/jaxunilat/_sensitivity.py", line 320, in _ball_jacobian\n'
+        "equinox.EquinoxRuntimeError: jaxunilat.simulate: the solver used all max_steps = 16384 steps "
+        "before t1 (event); increase max_steps\n\nAn error occurred during the runtime of your JAX program."
+    )
+
+    def fail(*args, **kwargs):
+        raise RuntimeError(wrapped)
+
+    monkeypatch.setattr(sensitivity, "ball_sensitivity", fail)
+    code = main(["sensitivity", "ball", "--t1", "30"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code != 0 and len(err) == 1
+    assert err[0] == (
+        "jaxunilat: error: jaxunilat.simulate: the solver used all max_steps = 16384 steps before t1 "
+        "(event); increase max_steps"
+    )
