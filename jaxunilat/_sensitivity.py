@@ -406,11 +406,16 @@ def format_table(result: SensitivityResult) -> str:
         lines.append(f"{name:<12} {value:>14}  {cells}")
         if result.fd is not None:
             lines.append(f"{'  (FD)':<12} {'':>14}  " + " ".join(f"{v:>9.4f}" for v in result.fd[i]))
-    if not result.meaningful:
+    missing = [name for name, v in zip(result.outputs, result.values, strict=True) if not np.isfinite(v)]
+    if missing:
+        lines.append(
+            f"not meaningful: {', '.join(missing)} did not happen within the horizon (a missing event is "
+            "not a sensitivity); lengthen the horizon (--t1)"
+        )
+    elif not result.meaningful:
         lines.append(
             f"not meaningful: the final state's normalized gradient norm is {result.growth:.3g} (it grows "
-            "with the horizon: a chaotic regime, or an output that does not exist in it); shorten the "
-            "horizon (--t1) or use windowed outputs"
+            "with the horizon, as in a chaotic regime); shorten the horizon (--t1) or use windowed outputs"
         )
     else:
         lines.append(f"final state's normalized gradient norm: {result.growth:.3g} (regular)")

@@ -64,3 +64,15 @@ def test_cli_sensitivity(capsys):
     assert "impact_1" in out and "kappa" in out and "regular" in out
     assert main(["sensitivity", "ball", "--example", "9"]) == 2
     assert main(["sensitivity", "ball", "--h", "1"]) == 2
+
+
+def test_an_output_missing_within_the_horizon_is_not_called_chaotic():
+    """Example 2's first apex comes at 1.61 s: with t1 = 1 s the apexes do not exist, the
+    gradient norm is small, and the table says the events are missing (not chaos)."""
+    from jaxunilat._sensitivity import format_table
+
+    result = ju.ball_sensitivity(2, t1=1.0)
+    text = format_table(result)
+    assert not result.meaningful and result.growth < 1e3
+    assert "apex_1, apex_2, apex_3 did not happen within the horizon" in text
+    assert "chaotic" not in text
