@@ -42,6 +42,7 @@ from ._gradient_growth import GradientGrowth as GradientGrowth, gradient_growth 
 from ._heaviside import (  # noqa: E402
     AbstractHeaviside as AbstractHeaviside,
     Exact as Exact,
+    ExactHeavisideGradientWarning as ExactHeavisideGradientWarning,
     Logistic as Logistic,
     Softplus as Softplus,
     heaviside as heaviside,

@@ -30,3 +30,27 @@ def test_smoothing_error_decreases_with_eps(option, ref_ex2):
     # error of the exact model at this tolerance (~3e-7 m), so this measures the bias.
     assert errors[2] <= 2e-3
     assert errors[0] > 0.05  # ε = 1e-3 m is a different model (penetration is only 3.9 mm)
+
+
+def test_derivatives_through_the_exact_switch_warn_and_say_what_to_use():
+    """jax.grad through a time-stepping solve of the exact Heaviside misses the jump terms
+    (here it has the wrong sign against the event mode's exact derivative): it warns, naming
+    the event mode; the event mode and a smooth switch do not warn."""
+    import warnings
+
+    import jax
+
+    def x_end(kappa, solver, heaviside):
+        ball = jaxunilat.Ball.table1(2, kappa=kappa, heaviside=heaviside)
+        sol = jaxunilat.simulate(
+            ball, jaxunilat.ball_state(-0.4, -8.0), 0.5, solver=solver, samples=3, outputs=("x",)
+        )
+        return sol.ys["x"][-1]
+
+    with pytest.warns(jaxunilat.ExactHeavisideGradientWarning, match="use solver='event'"):
+        jax.grad(x_end)(1e4, "tsit5", jaxunilat.Exact())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", jaxunilat.ExactHeavisideGradientWarning)
+        jax.grad(x_end)(1e4, "event", jaxunilat.Exact())
+        jax.grad(x_end)(1e4, "tsit5", jaxunilat.Logistic(1e-4))
+        x_end(1e4, "tsit5", jaxunilat.Exact())  # no derivative, no warning
