@@ -426,11 +426,18 @@ _COMMANDS = (
 def build_parser() -> argparse.ArgumentParser:
     """The full argument parser (errors raise `UsageError`)."""
     from . import __version__
+    from ._compilation_cache import CACHE_DIR_ENV, NO_CACHE_ENV, cache_dir
 
     parser = _Parser(
-        prog=PROG, description="Differentiable simulation of systems with unilateral constraints [K90]."
+        prog=PROG,
+        description="Differentiable simulation of systems with unilateral constraints [K90].",
+        epilog=f"Compiled solvers are cached in {cache_dir()} (${CACHE_DIR_ENV} moves it; --no-cache or "
+        f"{NO_CACHE_ENV}=1 turns it off): a second run skips compilation.",
     )
     parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
+    parser.add_argument(
+        "--no-cache", action="store_true", help="do not use the persistent compilation cache for this run"
+    )
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_Parser)
     for add in _COMMANDS:
         add(commands)
@@ -512,6 +519,10 @@ def main(argv: list[str] | None = None) -> int:
     callback_log.setLevel(logging.CRITICAL)
     try:
         args = build_parser().parse_args(argv)
+        if not args.no_cache:
+            from ._compilation_cache import enable_compilation_cache
+
+            enable_compilation_cache()
         return int(args.func(args))
     except SystemExit as exc:  # --help, --version
         return exc.code if isinstance(exc.code, int) else EXIT_OK if exc.code is None else EXIT_USAGE

@@ -6,6 +6,10 @@ import sys
 import jax
 import pytest
 
+# The suite never reads or writes the command line's persistent compilation cache: every
+# test compiles what it runs (tests/test_compilation_cache.py turns it on in a subprocess).
+os.environ["JAXUNILAT_NO_CACHE"] = "1"
+
 jax.config.update("jax_enable_x64", True)
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
