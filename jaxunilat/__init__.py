@@ -74,4 +74,14 @@ from ._simulate import (  # noqa: E402
 from ._solvers import RK4 as RK4  # noqa: E402
 from ._sweep import sweep as sweep  # noqa: E402
 
-__version__ = "0.1.0"
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("jaxunilat")
+    except PackageNotFoundError:  # a source tree on sys.path, not installed
+        return "0+unknown"
+
+
+__version__ = _version()
