@@ -293,8 +293,9 @@ def _validate(ds: Dataset, where: _Where) -> None:
 # -- reading -----------------------------------------------------------------------------
 
 
-def _read_text(path) -> tuple[str, str]:
-    """The file's text (UTF-8, an optional BOM dropped) and its name for messages."""
+def read_bytes(path, what: str = "a data file") -> tuple[bytes, str]:
+    """A file's bytes and its name for messages; one-line `ValueError`s for a bad path,
+    a directory (`what` says what was expected), a missing or unreadable file."""
     try:
         name = os.fspath(path)
     except TypeError:
@@ -302,14 +303,19 @@ def _read_text(path) -> tuple[str, str]:
     if isinstance(name, bytes):
         name = os.fsdecode(name)
     if os.path.isdir(name):
-        raise ValueError(f"{name}: is a directory, not a data file")
+        raise ValueError(f"{name}: is a directory, not {what}")
     try:
         with open(name, "rb") as f:
-            raw = f.read()
+            return f.read(), name
     except FileNotFoundError:
         raise ValueError(f"{name}: no such file") from None
     except OSError as err:
         raise ValueError(f"{name}: cannot be read ({err.strerror or err})") from None
+
+
+def _read_text(path) -> tuple[str, str]:
+    """The file's text (UTF-8, an optional BOM dropped) and its name for messages."""
+    raw, name = read_bytes(path)
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as err:

@@ -35,6 +35,7 @@ import struct
 
 import numpy as np
 
+from ._data import read_bytes
 from ._import import (
     ImportResult,
     Rejected,
@@ -42,6 +43,7 @@ from ._import import (
     fit_intervals,
     impacts_dataset,
     interval_warnings,
+    plot_intervals,
     ratio_ok,
 )
 
@@ -91,16 +93,7 @@ def read_wav(path) -> WavAudio:
     the last whole frame. Anything else raises a one-line `ValueError` naming the file
     and the cause. The file is only read.
     """
-    name = os.fspath(path)
-    if os.path.isdir(name):
-        raise ValueError(f"{name}: is a directory, not a WAV file")
-    try:
-        with open(name, "rb") as f:
-            raw = f.read()
-    except FileNotFoundError:
-        raise ValueError(f"{name}: no such file") from None
-    except OSError as err:
-        raise ValueError(f"{name}: cannot be read ({err.strerror or err})") from None
+    raw, name = read_bytes(path, "a WAV file")
     if len(raw) < 12 or raw[8:12] != b"WAVE" or raw[:4] not in (b"RIFF", b"RF64", b"RIFX"):
         kinds = {b"ID3": "an MP3", b"fLa": "a FLAC", b"Ogg": "an Ogg"}
         kind = "an M4A/MP4" if raw[4:8] == b"ftyp" else kinds.get(raw[:3])
@@ -553,24 +546,8 @@ def plot_detection(result: ImportResult, *, samples=None, title: str | None = No
     top.legend(loc="upper right", fontsize=8)
     onsets = det.onsets
     if len(onsets) >= 2:
-        fit = fit_intervals(onsets)
-        bottom.plot(onsets[:-1], np.diff(onsets) * 1e3, "o", ms=4, color="C0", label="intervals")
-        if fit is not None:
-            bottom.plot(fit.start, fit.expected * 1e3, "-", color="C1", lw=1, label="smooth fit")
-            out = ~fit.inlier
-            if out.any():
-                bottom.plot(
-                    fit.start[out],
-                    fit.interval[out] * 1e3,
-                    "s",
-                    mfc="none",
-                    color="C3",
-                    ms=9,
-                    label="breaks the decay",
-                )
-        bottom.legend(loc="upper right", fontsize=8)
+        plot_intervals(bottom, onsets, smooth_label="smooth fit", outlier_label="breaks the decay")
     bottom.set_xlabel("interval start [s]")
-    bottom.set_ylabel("interval [ms]")
     top.set_title(title or f"{os.path.basename(result.source)}: {len(onsets)} onsets", fontsize=10)
     for ax in (top, bottom):
         ax.grid(True, alpha=0.3)

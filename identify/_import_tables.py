@@ -19,7 +19,7 @@ import re
 
 import numpy as np
 
-from ._data import Dataset
+from ._data import Dataset, read_bytes
 from ._import import (
     DEFAULT_DRAG,
     DEFAULT_MASS,
@@ -29,6 +29,7 @@ from ._import import (
     fit_intervals,
     impacts_dataset,
     interval_warnings,
+    plot_intervals,
     source_text,
 )
 
@@ -93,19 +94,6 @@ def _split_header(text: str) -> Column:
     return Column(text, text, None)
 
 
-def _read_bytes(path) -> tuple[bytes, str]:
-    name = os.fspath(path)
-    if os.path.isdir(name):
-        raise ValueError(f"{name}: is a directory, not a file")
-    try:
-        with open(name, "rb") as f:
-            return f.read(), name
-    except FileNotFoundError:
-        raise ValueError(f"{name}: no such file") from None
-    except OSError as err:
-        raise ValueError(f"{name}: cannot be read ({err.strerror or err})") from None
-
-
 def _decode(raw: bytes, name: str) -> str:
     if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
         return raw.decode("utf-16")
@@ -119,7 +107,7 @@ def _decode(raw: bytes, name: str) -> str:
 
 def read_table(path) -> Table:
     """Read a delimited text table or an `.xlsx` workbook (the sheet with the most numbers)."""
-    raw, name = _read_bytes(path)
+    raw, name = read_bytes(path)
     if raw.startswith(b"PK\x03\x04"):
         return _read_xlsx(name)
     text = _decode(raw, name)
@@ -688,25 +676,10 @@ def plot_table_import(result: ImportResult, *, title: str | None = None):
         ax.set_xlabel("t [s] (0 = first tracked frame)")
         ax.set_ylabel("x [mm]")
     else:
-        t = np.asarray(ds.t)
-        ax.plot(t[:-1], np.diff(t) * 1e3, "o", ms=4, color="C0", label="intervals")
-        fit = fit_intervals(t)
-        if fit is not None:
-            ax.plot(fit.start, fit.expected * 1e3, "-", color="C1", lw=1, label="smooth decay")
-            out = ~fit.inlier
-            if out.any():
-                ax.plot(
-                    fit.start[out],
-                    fit.interval[out] * 1e3,
-                    "s",
-                    mfc="none",
-                    color="C3",
-                    ms=9,
-                    label="breaks the decay (kept)",
-                )
-        ax.legend(loc="upper right", fontsize=8)
+        plot_intervals(
+            ax, np.asarray(ds.t), smooth_label="smooth decay", outlier_label="breaks the decay (kept)"
+        )
         ax.set_xlabel("interval start [s] (recording clock)")
-        ax.set_ylabel("interval [ms]")
     ax.grid(True, alpha=0.3)
     ax.set_title(title or f"{os.path.basename(result.source)}: {ds.num_rows} rows", fontsize=10)
     return fig
