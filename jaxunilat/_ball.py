@@ -10,7 +10,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
 
-from ._contact import AbstractContactLaw, ClampedKelvinVoigt, KelvinVoigt, rk4_step_limit
+from . import _rest
+from ._contact import AbstractContactLaw, ClampedKelvinVoigt, HuntCrossley, KelvinVoigt, rk4_step_limit
 from ._flight import apex_rise, apex_time, fall_time, flight_state, longest_fall, rise_time
 from ._heaviside import AbstractHeaviside, Exact
 from ._model import AbstractModel
@@ -300,6 +301,74 @@ class Ball(AbstractModel):
             )
         longest = jnp.where(rising, inf, longest_fall(self.gravity, self.drag))
         return apex, jnp.stack(walls), longest
+
+    # -- the event mode's view of a ball at rest on the lower wall -----------------
+
+    def _lower_only(self, mask):
+        """Whether `mask` is a contact with the lower wall alone (static False without one)."""
+        if self.lower is None:
+            return jnp.zeros((), bool)
+        return mask[0] if self.upper is None else mask[0] & ~mask[1]
+
+    def rest_error(self, y: Array, mask: Array, horizon: Array) -> Array:
+        """Whether the contact in `mask` can never end, and how well `rest_state` follows it.
+
+        Gravity presses the ball into the lower wall, and inside the contact the energy
+        about the static deflection never increases, so below the exit threshold the
+        contact provably never ends (see `jaxunilat._rest`). An upper wall under gravity
+        pushes the ball away and no wall holds a ball without gravity.
+
+        **Returns:** +inf where the contact can still end (flight, the upper wall, an
+        energy above the threshold); otherwise a bound, m, on the distance between the
+        true motion and `rest_state` over the next `horizon` s, as the amplitude
+        √(Δx² + Δv²/ω²) (ω the contact's angular frequency): 0 for Kelvin–Voigt without
+        drag (its closed form is exact), c·A²·min(ωT, 1/(4ζ)) with drag (c = k²g, A the
+        amplitude about the static deflection, T = `horizon`), never more than 2A (and
+        2A for the clamped law while its clamp may act), and for Hunt–Crossley the
+        largest distance from the rest state that the energy allows. Other laws: +inf.
+        """
+        x, v = y[0], y[1]
+        inf = jnp.full_like(x, jnp.inf)
+        if self.lower is None:
+            return inf
+        pen = self.lower - x
+        if isinstance(self.law, HuntCrossley):
+            err = _rest.hunt_crossley_rest_error(
+                pen, v, self.kappa, self.mass, self.gravity, self.law.exponent
+            )
+        elif isinstance(self.law, (KelvinVoigt, ClampedKelvinVoigt)):
+            err = _rest.kelvin_voigt_rest_error(
+                pen,
+                v,
+                horizon,
+                self.kappa,
+                self.k_r,
+                self.mass,
+                self.gravity,
+                self.drag,
+                isinstance(self.law, ClampedKelvinVoigt),
+            )
+        else:
+            return inf
+        return jnp.where(self._lower_only(mask), err, inf)
+
+    def rest_state(self, y: Array, tau: Array) -> Array:
+        """The state `tau` s after `y` in a contact with the lower wall that never ends
+        (`rest_error` finite), within `rest_error`'s bound of the true motion: for
+        Kelvin–Voigt and the clamped law the damped oscillator about x = wall − mg/κ in
+        closed form; for Hunt–Crossley the rest state x = wall − (mg/κ)^(1/n), v = 0."""
+        x, v = y[0], y[1]
+        if self.lower is None:
+            return y  # never used: without a lower wall `rest_error` is +inf
+        if isinstance(self.law, HuntCrossley):
+            # (g = 0 never rests: a safe g keeps the unused power's derivative finite.)
+            g = jnp.where(self.gravity > 0, self.gravity, 1.0)
+            star = _rest.hunt_crossley_deflection(self.kappa, self.mass, g, self.law.exponent)
+            return jnp.stack([self.lower - star + jnp.zeros_like(x), jnp.zeros_like(v)])
+        u, vv = _rest.kelvin_voigt_rest_state(
+            self.lower - x, v, tau, self.kappa, self.k_r, self.mass, self.gravity
+        )
+        return jnp.stack([self.lower + u, vv])
 
     def energy(self, x: Array, v: Array) -> Array:
         """Kinetic + gravitational (zero at x = 0) + stored contact energy, J."""

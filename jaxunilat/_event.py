@@ -26,6 +26,24 @@ boundary:
    the new kind of region. With the drag's kink (|v|·v), a piece also ends at every
    root of v unless the kink's effect over the step is negligible.
 
+5. A contact that can provably never end (a ball resting on the lower wall under
+   gravity: inside the contact the energy about the static deflection never increases,
+   and below the exit threshold the ball cannot get back to the wall; the model's
+   `rest_error`) costs one piece instead of explicit steps at ω = √(κ/m) to t1. After
+   every accepted piece the model bounds the error of its closed form (`rest_state`)
+   over the rest of the span; once that bound is within the tolerance (atol + rtol·|y|,
+   in the model's energy-norm units) the next piece is that closed form, to t1 in one
+   loop iteration (its record row has direction 0, so that the outputs at the save
+   times in it come from the closed form too). For the ball that is
+   the damped oscillator about x = wall − mg/κ (Kelvin–Voigt: exact without drag, and
+   with drag once the drag's effect is provably below the tolerance) or the exact rest
+   state (Hunt–Crossley, once the energy keeps the ball that close to it). Until then
+   the steps go on (the damping brings the bound down); the contact gets no exit, and
+   `EventRecord.rest_time` says from when it provably never ends. The decisions are
+   under `stop_gradient` and the closed forms are plain `jax.numpy`, so the rest is
+   differentiable (the rest position carries the derivatives in κ, m, g) and vmapped
+   (resting rows and flying rows in one batch).
+
 Every event (entry, exit, apex, deepest point) is recorded in a fixed-size buffer,
 and the start (time, state, region) of every accepted step that holds a save time in
 another (at most one row per save time). After the loop each output at a save time s
@@ -82,6 +100,9 @@ class EventRecord(eqx.Module):
       contact on the step sub-grid, N.
     - `count`: how many events were recorded.
     - `open_peak_force`: the running peak of a contact still open at t1, N.
+    - `rest_time`: the time from which the contact open at t1 provably never ends
+      (the ball rests on the lower wall: see `Ball.rest_error`), s; +inf if none.
+      Such a contact has no exit and, once resting, no further events.
     """
 
     t: Array
@@ -91,6 +112,7 @@ class EventRecord(eqx.Module):
     peak_force: Array
     count: Array
     open_peak_force: Array
+    rest_time: Array
 
 
 #: The Runge–Kutta pairs the event mode can integrate its smooth pieces with:
@@ -374,6 +396,9 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
     n_ts = ts.shape[0]
     # Each save time is in one recorded step, so the steps that hold one fit in n_ts rows.
     rows = min(max_steps, n_ts)
+    # A contact that can never end (a ball at rest) in closed form, where the model
+    # has one (static): one piece from where that is proven, to t1.
+    settles = hasattr(type(model), "rest_error")
     fractions = jnp.linspace(0.0, 1.0, settings.subgrid + 1)[1:]
     dtype = y0.dtype
 
@@ -418,6 +443,19 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         return jnp.max(jnp.abs(a - a_free)) * model.contact_mass
 
     start_in_contact = jnp.any(mask0)
+
+    def rest_bound(y, mask, t):
+        # The model's bound on its closed form's error over [t, t1] (+inf: the contact
+        # can still end), and whether it is within a step's accuracy: the tolerance of
+        # the largest state component, in the energy norm's units (m for the ball).
+        bound = jax.lax.stop_gradient(model.rest_error(y, mask, t1 - t))
+        scale = settings.atol + settings.rtol * jnp.max(jnp.abs(jax.lax.stop_gradient(y)))
+        return bound < jnp.inf, bound <= scale
+
+    if settles:
+        proven0, resting0 = rest_bound(y0, mask0, t0)
+    else:
+        proven0 = resting0 = jnp.array(False)
     first_event = jnp.concatenate(
         [
             jnp.stack(
@@ -437,6 +475,10 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         f0=f_init,
         direction=direction0,
         seen_extremum=jnp.array(False),
+        # The contact provably never ends (from `rest_time` on) and the model's closed
+        # form follows it to t1 within the tolerance: the next piece is that closed form.
+        resting=resting0,
+        rest_time=jnp.where(proven0, t0, jnp.inf).astype(dtype),
         peak=jnp.where(jnp.any(mask0), contact_force_abs(y0, mask0), 0.0),
         n_steps=jnp.array(0),
         n_accepted=jnp.array(0),
@@ -683,8 +725,37 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
                 f_max=jnp.zeros((), dtype),
             )
 
-        if closed_flight:
+        def rest_piece():
+            # A contact that never ends, to t1 in one piece: the model's closed form
+            # (no events; its record row says so with direction 0).
+            y_end = model.rest_state(y, t1 - t)
+            no = jnp.array(False)
+            return dict(
+                t_end=t1,
+                y_end=y_end,
+                mask=mask,
+                direction=direction,
+                f0=c["f0"],
+                ext=(no, t1, y_end),
+                cross=(no, t1, y_end, no, jnp.array(0)),
+                accept=jnp.array(True),
+                fail=~jnp.all(jnp.isfinite(y_end)),
+                dt_new=c["dt"],
+                h_used=c["dt_region"][_region_index(mask)],
+                f_max=contact_force_abs(y, mask),
+            )
+
+        if closed_flight and settles:
+            # Nested: with a three-way switch XLA compiled the other pieces' arithmetic
+            # differently (outputs of runs that never rest changed in their last bits).
+            def contact_piece():
+                return _packed_cond(c["resting"], rest_piece, rk_piece, dtype)
+
+            out = _packed_cond(~in_contact, flight_piece, contact_piece, dtype)
+        elif closed_flight:
             out = _packed_cond(~in_contact, flight_piece, rk_piece, dtype)
+        elif settles:
+            out = _packed_cond(c["resting"], rest_piece, rk_piece, dtype)
         else:
             out = rk_piece()
         t_end, accept, h_used, dt_new = out["t_end"], out["accept"], out["h_used"], out["dt_new"]
@@ -698,7 +769,9 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         # Record the accepted step's start, valid on [t, t_end], if a save time lies in it.
         holds = accept & (c["saved"] < n_ts) & (ts[jnp.minimum(c["saved"], n_ts - 1)] <= t_end)
         first = c["saved"].astype(dtype)
-        row = jnp.concatenate([jnp.stack([t, t_end, direction, first]), mask.astype(dtype), y])
+        # Direction 0 marks a resting piece (`step_to` then takes the closed form).
+        row_direction = jnp.where(c["resting"], 0.0, direction) if settles else direction
+        row = jnp.concatenate([jnp.stack([t, t_end, row_direction, first]), mask.astype(dtype), y])
         c["rec"] = eqxi.buffer_at_set(c["rec"], c["n_rec"], row, pred=holds & (c["n_rec"] < rows))
         c["n_rec"] = c["n_rec"] + jnp.where(holds, 1, 0)
         c["saved"] = jnp.where(holds, _count_at_or_before(ts, t_end), c["saved"])
@@ -720,6 +793,17 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         c["peak"] = jnp.where(event, jnp.where(entering, f_new, 0.0), peak)
         c["seen_extremum"] = jnp.where(event, False, seen)
 
+        if settles:
+            # From the end of this piece, can the contact never end, and does the closed
+            # form follow it to t1? An exit (which a proven rest cannot have) clears the
+            # rest time, so that it never outlives its contact.
+            proven, ready = rest_bound(out["y_end"], out["mask"], t_end)
+            proven, ready = accept & proven, accept & proven & ready
+            first_proof = proven & (c["rest_time"] == jnp.inf)
+            c["rest_time"] = jnp.where(
+                event & ~entering, jnp.inf, jnp.where(first_proof, t_end, c["rest_time"])
+            )
+            c["resting"] = c["resting"] | ready
         c["t"] = jnp.where(accept, t_end, t)
         c["y"] = jnp.where(accept, out["y_end"], y)
         c["mask"] = jnp.where(accept, out["mask"], mask)
@@ -760,7 +844,12 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         def piece_rhs(tt, z):
             return rhs(tt, z, mask, sign)
 
-        return _erk_step(solver_cls, piece_rhs, t_st, s - t_st, y_st, piece_rhs(t_st, y_st))[0]
+        def rk_step():
+            return _erk_step(solver_cls, piece_rhs, t_st, s - t_st, y_st, piece_rhs(t_st, y_st))[0]
+
+        if not settles:
+            return rk_step()
+        return jax.lax.cond(sign == 0, lambda: model.rest_state(y_st, s - t_st), rk_step)
 
     if closed_flight:
         # Steps of the pair only at the times in contact (the contacts last milliseconds).
@@ -785,6 +874,7 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         peak_force=ev[:, 3],
         count=final["n_events"],
         open_peak_force=final["peak"],
+        rest_time=final["rest_time"],
     )
     stats = dict(
         num_steps=final["n_steps"],

@@ -84,6 +84,39 @@ def test_stress_quick_subset(tmp_path):
     assert any(o.kind == "clear" and o.config.mode == "float32" for o in outcomes)
 
 
+def _quick_rest_configs(per_kind=3):
+    """Event mode (Tsit5 and Dopri8 pieces) with drag: balls dropped to rest on one wall,
+    grazing apexes at the upper wall and horizons of 5 s or more, `per_kind` of each from
+    the same seed, any κ. Damping ζ ≥ 0.1, so that the balls settle within the horizon and
+    the references (which detect the rest) take well under a second; four compiles
+    (two modes, one- and two-sided walls)."""
+    picked, count = [], {}
+    for c in make_configs(4000):
+        if c.mode not in ("event", "event-dopri8") or c.drag is None:
+            continue
+        if c.k_r < 0.1 * 2 * math.sqrt(c.kappa * MASS):
+            continue
+        kind = c.family if c.family in ("rest", "grazing") else ("long" if c.t1 >= 5.0 else None)
+        if kind is None or count.get((c.mode, kind), 0) >= per_kind:
+            continue
+        count[(c.mode, kind)] = count.get((c.mode, kind), 0) + 1
+        picked.append(c)
+    return picked
+
+
+def test_stress_quick_rest_subset(tmp_path):
+    """Balls that come to rest (or bounce for long) never run out of steps: every run of
+    the subset succeeds within its contract, none is even a clear error."""
+    configs = _quick_rest_configs()
+    assert len(configs) == 18
+    outcomes = run_all(configs)
+    _write(outcomes, tmp_path, "stress_quick_rest.md")
+    assert not _silent(outcomes), "\n".join(_silent(outcomes))
+    failed = [f"#{o.config.index} {o.config.mode} {o.config.family}: {o.kind} ({o.detail})" for o in outcomes]
+    failed = [line for line, o in zip(failed, outcomes, strict=True) if o.kind != "pass"]
+    assert not failed, "\n".join(failed)
+
+
 @pytest.mark.stress
 def test_stress_full(tmp_path, request):
     configs = make_configs(int(os.environ.get("JAXUNILAT_STRESS_N", "500")))
