@@ -42,7 +42,7 @@ GRAVITY = 9.81
 
 #: The drop test: an ITTF-like ball (40 mm, 2.7 g) released from rest with its lowest
 #: point 305 mm above a rigid surface at x = 0. The truth is given as (e, t_c); κ and k_r
-#: follow from `jaxunilat.parameters_from_restitution` (Kelvin–Voigt, SPEC §5). e = 0.935
+#: follow from `jaxunilat.parameters_from_restitution` (inverse Kelvin–Voigt). e = 0.935
 #: (with drag 0.12 s/m) gives a first rebound of about 247 mm: ITTF-compliant (240–260 mm).
 DROP = dict(mass=2.7e-3, drag=0.12, x0=0.305, v0=0.0, restitution=0.935, contact_time=1.0e-3)
 #: The drop trace: 1 kHz over [0, 2.5] s, noise 0.5 mm; positions printed to 1 µm.

@@ -30,7 +30,7 @@ d_0 = d_max), the effective stiffness d·k and damping d·b are
 
 Both formats give MuJoCo the same contact, which is the Kelvin–Voigt law with one
 difference: a MuJoCo contact force cannot pull. The paper's law pulls briefly
-before separation (SPEC §2.2), MuJoCo's releases the ball when the force reaches
+before separation (`jaxunilat.KelvinVoigt`), MuJoCo's releases the ball when the force reaches
 zero, so MuJoCo's rebound is slightly more elastic. Without gravity this
 non-adhesive law has a closed form (`nonadhesive_rebound`): e = 0.94202 instead
 of the Kelvin–Voigt 0.94132 at κ = 1e4 N/m, k_r = 0.2 N·s/m, m = 2.7 g, and the
@@ -85,7 +85,7 @@ class Estimate(NamedTuple):
 
 
 def _zeta_from_e(e: float) -> float:
-    """ζ = −ln e / √(π² + ln²e) [SPEC §5], the inverse of e = exp(−πζ/√(1 − ζ²))."""
+    """ζ = −ln e / √(π² + ln²e), the inverse of e = exp(−πζ/√(1 − ζ²))."""
     le = math.log(e)
     return -le / math.sqrt(math.pi**2 + le**2)
 

@@ -1,7 +1,7 @@
-"""Closed-form initial guesses for the restitution e (SPEC §5).
+"""Closed-form initial guesses for the restitution e.
 
 The contact time t_c is not visible in rebound heights or flight times to first order,
-so the guess takes it from a prior (0.5–2 ms for a table-tennis ball, SPEC §5); the
+so the guess takes it from a prior (0.5–2 ms, assumed for a table-tennis ball); the
 multi-start spreads over that prior. With (e, t_c) the Kelvin–Voigt inverse gives
 (κ, k_r), `jaxunilat.parameters_from_restitution`.
 """
@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-#: The contact-time prior, s (SPEC §5: no public measurement; 0.5–2 ms).
+#: The contact-time prior, s: an assumed range, not a measurement.
 CONTACT_TIME_PRIOR = (0.5e-3, 2.0e-3)
 #: The prior's centre (geometric mean), s.
 CONTACT_TIME_GUESS = math.sqrt(CONTACT_TIME_PRIOR[0] * CONTACT_TIME_PRIOR[1])

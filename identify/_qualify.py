@@ -14,10 +14,11 @@ heights (the standard error is their standard deviation).
   the fit's standard errors (relative: sd(log κ) = stderr(κ)/κ) and correlation.
 - When only the restitution is identified (apex heights; `identifiable.kappa` false),
   e is drawn from N(e, stderr(e)²) and the contact time t_c log-uniformly from the
-  0.5–2 ms prior (SPEC §5), and (κ, k_r) follow from the inverse Kelvin–Voigt map at the
-  fit's mass. The rebound height depends on t_c only through gravity and drag acting
-  during the ~1 ms contact: `tc_sensitivity` reports the height change across the prior
-  (about 0.2 mm for the ITTF test, small against the 20 mm window).
+  0.5–2 ms prior (`identify._initial.CONTACT_TIME_PRIOR`), and (κ, k_r) follow from the
+  inverse Kelvin–Voigt map at the fit's mass. The rebound height depends on t_c only
+  through gravity and drag acting during the ~1 ms contact: `tc_sensitivity` reports the
+  height change across the prior (about 0.2 mm for the ITTF test, small against the
+  20 mm window).
 
 PASS when the 95% interval lies inside [min, max]; FAIL when the estimate (the height at
 the point estimate) lies outside; INCONCLUSIVE when the estimate is inside but the
@@ -43,7 +44,7 @@ ITTF_MAX = 0.260
 DEFAULT_DRAG = 0.12
 DEFAULT_GRAVITY = 9.81
 DEFAULT_SAMPLES = 1000
-#: The contact-time prior used when κ is not identified, s (SPEC §5).
+#: The contact-time prior used when κ is not identified, s (as `identify._initial.CONTACT_TIME_PRIOR`).
 CONTACT_TIME_PRIOR = (0.5e-3, 2.0e-3)
 VERDICTS = ("PASS", "FAIL", "INCONCLUSIVE")
 
@@ -268,7 +269,7 @@ def _check_test(*, mass, drop, drag, gravity, min_height=0.0, max_height=1.0):
 
 
 def _kv(kappa, k_r, mass):
-    """Kelvin–Voigt (e, t_c) of (κ, k_r) at `mass` (SPEC §2.2: e = exp(−πζ/√(1−ζ²)))."""
+    """Kelvin–Voigt (e, t_c) of (κ, k_r) at `mass`: e = exp(−πζ/√(1−ζ²)), t_c = π/ω_d."""
     zeta = k_r / (2.0 * math.sqrt(kappa * mass))
     if zeta >= 1:
         return 0.0, math.nan
@@ -277,7 +278,7 @@ def _kv(kappa, k_r, mass):
 
 
 def _from_restitution(e, t_c, mass):
-    """The inverse Kelvin–Voigt map (SPEC §5), vectorized: (κ, k_r)."""
+    """The inverse Kelvin–Voigt map, vectorized: κ = m(π² + ln²e)/t_c², k_r = −2 m ln e / t_c."""
     le = np.log(e)
     return mass * (np.pi**2 + le**2) / t_c**2, -2.0 * mass * le / t_c
 

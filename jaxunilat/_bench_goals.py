@@ -1,9 +1,9 @@
 """The benchmark's goals P1–P5: values from the measured sections, notes on missed ones.
 
-The goals (SPEC §4, issue 8): P1, P2 ratios against the best peer in the same run; P3
-trajectories per second (and the ratio against a scipy loop); P4 gradient / forward;
-P5 compile time. Where a goal is missed, `notes` says why and what would close it,
-from the run's own figures.
+The goals (targets in `GOALS`, listed in README.md, "Performance"): P1, P2 ratios
+against the best peer in the same run; P3 trajectories per second (and the ratio
+against a scipy loop); P4 gradient / forward; P5 compile time. Where a goal is missed,
+`notes` says why and what would close it, from the run's own figures.
 """
 
 from __future__ import annotations

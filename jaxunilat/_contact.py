@@ -7,7 +7,7 @@ traced parameters that the model passes in.
 
 Closed forms for the paper's law (a linear spring plus a damper switched on in
 contact, the Kelvin–Voigt model), for a body of mass m hitting a wall without
-gravity [K90 §5.1, SPEC §5]:
+gravity [K90 §5.1]:
 
     ω_n = √(κ/m),   ζ = k_r / (2√(κ m)),   ω_d = ω_n √(1 − ζ²)
     t_c = π / ω_d                               (contact time, s)
@@ -65,7 +65,7 @@ class KelvinVoigt(AbstractContactLaw):
     Restitution and contact time (no gravity): see `restitution` and `contact_time`
     in this module; the inverse map (e, t_c) → (κ, k_r) is `parameters_from_restitution`.
 
-    Known pathologies (SPEC §2.2): the force jumps by k_r·v_in at touchdown, and it
+    Known pathologies: the force jumps by k_r·v_in at touchdown, and it
     pulls (is adhesive) just before separation, down to about −1.5 N in example 2.
     """
 
@@ -211,7 +211,7 @@ def rk4_step_limit(kappa, k_r, mass, xp=jnp):
 
 
 def parameters_from_restitution(e: ArrayLike, t_c: ArrayLike, mass: ArrayLike) -> tuple[Array, Array]:
-    """The inverse Kelvin–Voigt map (e, t_c) → (κ, k_r) [SPEC §5].
+    """The inverse Kelvin–Voigt map (e, t_c) → (κ, k_r).
 
     **Arguments:**
 

@@ -5,7 +5,7 @@ speed ω(t) = b(c − e^(−at)) [K90 Eq. 4.6]; φ(t) = b[c·t − (1 − e^(−
 angle. It tilts by the small rotations ψ_ξ, ψ_η about the transverse axes ξ and η,
 within the angular clearance δ = arctan(Δ/l) of the far joint. State
 y = (ψ_ξ, ψ̇_ξ, ψ_η, ψ̇_η) in rad and rad/s. With D and C the clearance ramp and
-switch (SPEC-coupling),
+switch,
 
     D(q; δ) = (q − δ)H(q − δ) + (q + δ)H(−q − δ),   C(q; δ) = H(q − δ) + H(−q − δ)
     T_η = κ D(ψ_ξ; δ_ξ) + h ψ̇_ξ + k_r ψ̇_ξ C(ψ_ξ; δ_ξ)            [K90 Eq. 4.8]
@@ -309,7 +309,7 @@ class Coupling(AbstractModel):
         p_lp = self.force_p * self.lever
         m_xi = p_lp * jnp.cos(phi) - arm * t_eta  # [K90 Eq. 4.7]
         m_eta = -p_lp * jnp.sin(phi) - arm * t_xi
-        if self.reading == "paper":  # [K90 Eq. 4.5] as printed (SPEC-coupling reading A)
+        if self.reading == "paper":  # [K90 Eq. 4.5] as printed (reading A)
             ddx = (m_xi + (j - jp) * w * dpe) / j
             dde = (m_eta - (j - jp) * w * dpx) / j
         else:  # reading B: ψ in the frame turning with φ

@@ -1,4 +1,4 @@
-"""How reverse-mode gradients grow with the horizon in the coupling's chaotic regime (issue 4).
+"""How reverse-mode gradients grow with the horizon in the coupling's chaotic regime.
 
 A loss over a window [t_s, t_s + T] of the coupling at full speed (t_s past the spin-up,
 ω ≈ b c) is differentiated by reverse mode through one `simulate` run with respect to

@@ -1,7 +1,7 @@
 """Independent references for the ball between two rackets [K90 Eq. 3.1–3.3].
 
 Nothing here imports `jaxunilat`: the right-hand side, the contact switching and the
-closed forms are written from the paper's equations (SPEC §2.2, §3) in plain NumPy/SciPy.
+closed forms are written from the paper's equations in plain NumPy/SciPy.
 
 - `scipy_reference`: scipy `solve_ivp(DOP853, rtol=1e-13, atol=1e-15)` with event
   location at the walls and one smooth right-hand side per region (free flight, lower
@@ -26,7 +26,7 @@ from scipy.optimize import brentq
 FREE, LOWER, UPPER = 0, -1, 1
 _HOLD = 2  # scipy_reference's internal "at rest from here on"
 
-# The paper's constants [K90 §5.1, Table 1] (SPEC §2.2).
+# The paper's constants [K90 §5.1, Table 1].
 PAPER = dict(mass=2.37e-3, gravity=9.81, drag=0.122, lower=-0.4, upper=0.4)
 TABLE1 = {1: (1.0e4, 0.1), 2: (1.0e4, 0.2), 3: (1.0e4, 0.4), 4: (5.0e3, 0.2), 5: (2.0e4, 0.2)}
 
@@ -158,7 +158,7 @@ def scipy_reference(
     with the new region's right-hand side; the new region follows from the event's
     direction (never from the sign of x − wall, which is zero there). Free flight
     caps the step (`max_step_free`) so that a step cannot jump over a short excursion
-    beyond the upper wall (a drag-free parabola has a zero error estimate, SPEC §3).
+    beyond the upper wall (a drag-free parabola has a zero error estimate).
 
     A piece that starts on a wall watches that wall with (x − wall)/(t − t_start)
     (→ v at the start) instead of x − wall: the root at the start itself is divided
@@ -463,7 +463,7 @@ def closed_form_reference(p: BallParams, y0, t1: float, *, t0: float = 0.0, max_
 
 
 def kelvin_voigt_restitution(kappa: float, k_r: float, mass: float) -> float:
-    """e = exp(−πζ/√(1 − ζ²)), ζ = k_r/(2√(κm)) (SPEC §8), for a g = 0 impact."""
+    """e = exp(−πζ/√(1 − ζ²)), ζ = k_r/(2√(κm)), for a g = 0 impact."""
     zeta = k_r / (2 * math.sqrt(kappa * mass))
     return math.exp(-math.pi * zeta / math.sqrt(1 - zeta**2))
 

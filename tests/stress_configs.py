@@ -1,4 +1,4 @@
-"""The numerical stress suite's configurations, runner and accuracy contract (issue 4).
+"""The numerical stress suite's configurations, runner and accuracy contract.
 
 Configurations are drawn from a fixed seed (`make_configs`), each run with `simulate`
 and compared with the independent scipy event-located reference (`reference.py`).
@@ -97,14 +97,14 @@ class Config:
 
 
 def _apex_speed(height: float, drag: float | None) -> float:
-    """Launch speed whose free-flight apex is `height` above the start [SPEC §8]."""
+    """Launch speed whose free-flight apex is `height` above the start: h = ln(1 + k²v²)/(2gk²)."""
     if drag is None or drag == 0:
         return math.sqrt(2 * GRAVITY * height)
     return math.sqrt(math.expm1(2 * GRAVITY * drag**2 * height)) / drag
 
 
 def make_configs(n: int = 500, seed: int = 20261122) -> list[Config]:
-    """`n` configurations from a fixed seed, covering the issue's ranges.
+    """`n` configurations from a fixed seed, covering the ranges of README.md, "Reliability and limits".
 
     κ log-uniform in [1e2, 1e9] N/m; k_r = ζ·2√(κm) with ζ in [0, 1] (ends included);
     drag off or uniform in [0, 0.2] s/m; horizons log-uniform up to 30 s; one- and

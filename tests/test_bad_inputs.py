@@ -1,4 +1,4 @@
-"""Malformed inputs: Python API, CLI flags and data files each give a clear error (issue 4).
+"""Malformed inputs: Python API, CLI flags and data files each give a clear error.
 
 Every Python-API case raises `ValueError` whose message names the parameter and the
 offending value (and, for a range, the valid range). Every CLI case exits with code 2

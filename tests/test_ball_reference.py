@@ -50,8 +50,9 @@ def test_rk4_dt_1e5_matches_reference(which, ref_ex2, ref_other):
     assert np.max(np.abs(x - x_ref)) <= 2e-3
 
 
-def test_example2_end_state_matches_spec(sim_ex2):
-    # SPEC §2.2 (trusted reference): x(2) = −0.31366094434574779 m, v(2) = 2.7757569948282916 m/s.
+def test_example2_end_state_matches_reference(sim_ex2):
+    # The scipy reference (tests/reference.py): x(2) = −0.31366094434574779 m,
+    # v(2) = 2.7757569948282916 m/s.
     # Tsit5 at tolerance 1e-10 with the exact Heaviside is accurate to ~1e-7 m; v changes
     # ~10x faster than x in relative terms, hence the looser v bound.
     x1, v1 = np.asarray(sim_ex2.y1)
@@ -61,7 +62,7 @@ def test_example2_end_state_matches_spec(sim_ex2):
     assert x[-1] == pytest.approx(x1, abs=1e-12) and v[-1] == pytest.approx(v1, abs=1e-12)
 
 
-def test_example2_contact_counts_match_spec(sim_ex2):
+def test_example2_contact_counts_match_reference(sim_ex2):
     # Every contact lasts ~1.5 ms > the 1 ms sample spacing, so each shows up in the samples.
     (x,) = arrays(sim_ex2, "x")
     entries_lower = np.count_nonzero(~(x[:-1] < -0.4) & (x[1:] < -0.4))
@@ -70,17 +71,17 @@ def test_example2_contact_counts_match_spec(sim_ex2):
     assert entries_lower + entries_upper == 8
 
 
-def test_example2_impact_times_match_spec():
-    spec = np.array([0.121668, 0.263023, 0.442707, 0.645994, 0.943403])
+def test_example2_impact_times_match_reference():
+    onsets = np.array([0.121668, 0.263023, 0.442707, 0.645994, 0.943403])
     walls = np.array([0.4, -0.4, 0.4, -0.4, 0.4])
     # Dense save windows (2 µs spacing) around each impact: same number of save times as
     # everywhere else, so no retrace.
-    windows = [np.linspace(t - 4e-4, t + 4e-4, 400) for t in spec]
+    windows = [np.linspace(t - 4e-4, t + 4e-4, 400) for t in onsets]
     ts = np.concatenate([*windows, [T1]])
     sol = tsit5(jaxunilat.Ball.table1(2), PAPER_Y0, T1, ts=ts)
     (x,) = arrays(sol, "x")
-    for i, (t_spec, wall) in enumerate(zip(spec, walls, strict=True)):
+    for i, (t_ref, wall) in enumerate(zip(onsets, walls, strict=True)):
         sl = slice(400 * i, 400 * (i + 1))
         crossings = crossing_times(ts[sl], x[sl], wall, direction=1 if wall > 0 else -1)
         assert len(crossings) == 1
-        assert crossings[0] == pytest.approx(t_spec, abs=1e-6)
+        assert crossings[0] == pytest.approx(t_ref, abs=1e-6)

@@ -54,7 +54,8 @@ def test_simulate_ball_writes_csv_and_png(tmp_path, capsys):
 def test_event_solver_counts_located_contacts(capsys):
     code, out, err = _run(["simulate", "ball", "--solver", "event", "--t1", "2", "--samples", "11"], capsys)
     assert code == 0, err
-    # SPEC §2.2 (trusted reference): 8 contacts over [0, 2] s, 3 of them upper.
+    # The scipy reference (tests/reference.py, DOP853 with event location, rtol 1e-13): 8 contacts
+    # over [0, 2] s, 3 of them upper.
     assert "8 located (5 lower, 3 upper)" in out
 
 
@@ -162,7 +163,7 @@ def test_events_writes_contact_table(tmp_path, capsys):
     lines = events.read_text().splitlines()
     assert lines[0] == "wall,t_in,t_out,v_in,v_out,restitution,peak_force,max_penetration"
     rows = [line.split(",") for line in lines[1:]]
-    # SPEC §2.2 (trusted reference): 8 contacts over [0, 2] s, 3 of them upper.
+    # The scipy reference (checked against it below): 8 contacts over [0, 2] s, 3 of them upper.
     assert len(rows) == 8
     assert [r[0] for r in rows].count("upper") == 3
     ref = scipy_reference(BallParams.table1(2), (-0.4, -1 / 0.122), 2.0).contacts
@@ -173,7 +174,7 @@ def test_events_writes_contact_table(tmp_path, capsys):
 
 def test_events_contact_open_at_t1_has_empty_fields(tmp_path, capsys):
     events = tmp_path / "contacts.csv"
-    # The first upper contact lasts from 0.121668 s to about 0.1232 s (SPEC §2.2).
+    # The first upper contact lasts from 0.121668 s to about 0.1232 s (the scipy reference).
     argv = ["simulate", "ball", "--solver", "event", "--t1", "0.1225", "--samples", "11"]
     code, _, err = _run([*argv, "--events", str(events)], capsys)
     assert code == 0, err

@@ -26,7 +26,8 @@ def _sigmoid(s):
 
 
 def _expected(name, z):
-    """(step, ramp, d step/dz at 0, d ramp/dz at 0) written from SPEC §2.4."""
+    """(step, ramp) from each option's definition: exact H(z), zH(z); logistic σ(z/ε), zσ(z/ε);
+    softplus σ(z/ε), ε·softplus(z/ε)."""
     if name == "exact":
         return (z > 0).astype(float), np.where(z > 0, z, 0.0)
     if name == "logistic":
@@ -194,7 +195,7 @@ def _zero_gravity_impact(law, kappa, k_r, m, v0, t1, tol):
 @pytest.mark.parametrize("kappa, k_r", [(1e4, 0.2), (3e4, 0.5)])
 def test_kelvin_voigt_matches_simulated_zero_gravity_impact(kappa, k_r):
     # Without gravity the contact is exactly half a damped period: x returns to the wall at
-    # t_c = π/ω_d with speed e·|v0| (SPEC §8: match to 1e-9).
+    # t_c = π/ω_d with speed e·|v0| (asserted to 1e-9).
     m, v0 = 2.37e-3, -5.0
     tc = kelvin_voigt_contact_time(kappa, k_r, m)
     e = kelvin_voigt_restitution(kappa, k_r, m)
@@ -260,6 +261,7 @@ def test_clamped_kelvin_voigt_is_never_adhesive_and_bounded():
         # Where the damper does not hit the clamp, the force is Kelvin–Voigt's κδ + k_r δ̇ H.
         free = np.abs(k_r * R * on) <= kappa * P
         np.testing.assert_allclose(f[free], (kappa * P + k_r * R * on)[free], rtol=1e-12, atol=0)
-    # The unclamped law does pull (SPEC §2.2) at the same state where the clamped one does not.
+    # The unclamped law does pull (adhesive before separation) at the same state where the
+    # clamped one does not.
     kv = float(jaxunilat.KelvinVoigt().force(jnp.asarray(1e-5), jnp.asarray(-5.0), 1.0, kappa, k_r))
     assert kv < 0

@@ -1,9 +1,9 @@
-"""The rolling-mill coupling [K90 Eq. 4.5–4.9, Table 2]: the invariants and checks of SPEC-coupling.md.
+"""The rolling-mill coupling [K90 Eq. 4.5–4.9, Table 2]: invariants and independent checks.
 
 Every run uses the event mode with the same outputs, sample count and budgets as the
 sensitivity module (`COUPLING_RUN`), so each reading compiles once for this file.
-References are closed forms (energy, sag, restitution), symmetry (spin reversal) and the
-spec's event-located scipy values (literal regression, claim margins).
+References are closed forms (energy, sag, restitution), symmetry (spin reversal) and values
+of the event-located scipy reference of `coupling_reference.py` (literal regression, peak forces).
 """
 
 import math
@@ -97,7 +97,7 @@ def test_joint_restitution_closed_form():
     kappa, k_r = float(model.kappa), float(model.k_r)
     zeta = k_r * 13.0 / (2.0 * math.sqrt(kappa * 13.0 * J_T))
     e = math.exp(-math.pi * zeta / math.sqrt(1 - zeta**2))
-    assert abs(zeta - 0.161) < 1e-3 and abs(e - 0.60) < 5e-3  # SPEC-coupling's numbers
+    assert abs(zeta - 0.161) < 1e-3 and abs(e - 0.60) < 5e-3  # the stiff constants' ζ and e
     closed = ~np.isnan(table["restitution"])
     assert np.sum(closed) >= 3
     np.testing.assert_allclose(table["restitution"][closed], e, rtol=1e-8)
@@ -105,7 +105,10 @@ def test_joint_restitution_closed_form():
 
 
 def test_literal_regression():
-    """The literal reading A is smooth: example 6 at t = 1 s (SPEC-coupling, rel. 1e-6)."""
+    """The literal reading A is smooth: example 6 at t = 1 s, rel. 1e-6.
+
+    The values are `coupling_reference.exact_run`'s with the literal κ = 0.05 J_t, k_r = 0.02 J_t.
+    """
     with pytest.warns(UserWarning, match="physically absurd"):
         model = Coupling.table2(6, "literal")
     sol = run(model, 1.0)
@@ -144,7 +147,8 @@ def test_claims_under_stiff(stiff_peaks):
     assert p[1] >= 1.3 * p[2] and p[2] >= 1.3 * p[3]
     assert p[2] >= 1.8 * p[4] and p[4] >= 1.8 * p[5]
     assert med[4] >= 1.2 * med[6]
-    # SPEC-coupling's measured peaks (A stiff, max of T_xi/T_eta), within the sampling error.
+    # The scipy reference's peaks of the elastic force (`coupling_reference.exact_run`, A stiff,
+    # max of |T_xi|, |T_eta| every 20 µs), within the sampling error.
     np.testing.assert_allclose([p[1], p[3], p[5]], [7.90e5, 2.07e5, 2.18e4], rtol=0.02)
 
 

@@ -32,7 +32,7 @@ FILES = sorted(f for f in os.listdir(DATA) if _is_data_file(f))
 
 
 def kv_parameters(e, t_c, m):
-    """The inverse Kelvin–Voigt map (SPEC §5): κ = m(π² + ln²e)/t_c², k_r = −2 m ln e / t_c."""
+    """The inverse Kelvin–Voigt map: κ = m(π² + ln²e)/t_c², k_r = −2 m ln e / t_c."""
     return m * (math.pi**2 + math.log(e) ** 2) / t_c**2, -2 * m * math.log(e) / t_c
 
 

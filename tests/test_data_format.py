@@ -1,4 +1,4 @@
-"""The data format: reading, writing, and clear errors for bad files (issue 5, item 1)."""
+"""The data format: reading, writing, and clear errors for bad files."""
 
 import hashlib
 import os

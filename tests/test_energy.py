@@ -1,4 +1,4 @@
-"""Energy balance: E = ½mv² + mgx + ½κ·pen² (SPEC §8).
+"""Energy balance: E = ½mv² + mgx + ½κ·pen².
 
 Without forcing, drag and contact damping only remove energy, so E never increases;
 without drag and damping it is conserved. The package's `energy` output is checked
@@ -24,7 +24,7 @@ def test_dissipative_energy_never_increases(sim_ex2):
     e = _check_energy_output(sim_ex2, BallParams.table1(2))
     e0 = e[0]
     # Measured with Tsit5 at tolerance 1e-10: max ΔE/E(0) ≈ −2e-13 between 1 ms samples,
-    # so SPEC §8's bound 1e-9·E(0) has a wide margin.
+    # so the bound 1e-9·E(0) asserted here has a wide margin.
     assert np.max(np.diff(e)) <= 1e-9 * e0
     assert e[-1] < 0.1 * e0  # most of the energy is gone after 8 impacts
 

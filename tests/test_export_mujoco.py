@@ -23,8 +23,9 @@ mujoco = pytest.importorskip(
 import identify  # noqa: E402
 import jaxunilat as ju  # noqa: E402
 
-#: (κ N/m, k_r N·s/m, m kg): the issue's table-tennis ball, a heavier, stiffer ball, and a
-#: strongly damped contact (ζ = 0.096, e = 0.74) where MuJoCo's non-pulling force matters.
+#: (κ N/m, k_r N·s/m, m kg): a table-tennis ball (Table 1 example 2's κ, k_r at 2.7 g), a
+#: heavier, stiffer ball, and a strongly damped contact (ζ = 0.096, e = 0.74) where
+#: MuJoCo's non-pulling force matters.
 SETS = {"ttball": (1e4, 0.2, 2.7e-3), "heavy": (2e5, 2.0, 0.025), "damped": (1e4, 1.0, 2.7e-3)}
 RADIUS = 0.02  # m
 H0, V0 = 1e-3, 2.5  # start 1 mm above the plane at 2.5 m/s down: the end of a 0.32 m drop

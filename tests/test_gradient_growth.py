@@ -1,4 +1,4 @@
-"""Reverse-mode gradients of a windowed coupling loss against the horizon (issue 4, item 6).
+"""Reverse-mode gradients of a windowed coupling loss against the horizon.
 
 Fixed-step RK4 with a smooth Heaviside makes the discrete map smooth in (κ, k_r), so a
 central finite difference of the forward loss is an independent check of the AD

@@ -185,7 +185,7 @@ def test_apex_heights_identify_e_but_not_kappa(reference):
     assert result.identifiable["restitution"]
     assert not result.identifiable["kappa"]
     assert not result.identifiable["k_r"]
-    # SPEC §5: apex heights leave log κ essentially undetermined (sd ≈ 7 at 1 mm noise).
+    # Apex heights leave log κ essentially undetermined: its 95% interval spans over a decade.
     kappa = result.parameters["kappa"]
     assert kappa["ci95"][1] / kappa["ci95"][0] > 10
 

@@ -1,9 +1,10 @@
 """Observations of an event-mode run: `contact_table`, `impact_times`, `apexes`.
 
 Every expected value comes from the independent scipy reference in `reference.py` (its
-contact list and dense solution) or from the drag closed form of free flight (SPEC §8),
-never from the package's own output. The example-2 run uses the same compiled
-configuration as `test_event_mode.py` (samples, outputs, max_steps, max_events).
+contact list and dense solution) or from the closed form of upward flight with quadratic
+drag (apex height ln(1 + k²v₀²)/(2gk²)), never from the package's own output. The
+example-2 run uses the same compiled configuration as `test_event_mode.py` (samples,
+outputs, max_steps, max_events).
 """
 
 import math
@@ -83,7 +84,7 @@ def test_contact_table_matches_reference_contacts(table2, ref_ex2):
         assert err <= tol, name
     e_ref = np.array([abs(c.v_out / c.v_in) for c in contacts])
     assert np.max(np.abs(table2["restitution"] - e_ref)) <= 1e-6
-    # SPEC §2.2: the effective restitution per impact is 0.9367–0.9377.
+    # The scipy reference's effective restitution per impact is 0.9367–0.9377.
     assert np.all((table2["restitution"] > 0.9366) & (table2["restitution"] < 0.9378))
 
 
@@ -95,7 +96,7 @@ def test_contact_table_penetration_and_peak_force(table2, ref_contact_extremes):
     print(f"max penetration: max |diff| = {d_err:.3e} m; peak force: max rel diff = {f_rel:.3e}")
     assert d_err <= 1e-8
     assert f_rel <= 1e-3
-    # SPEC §2.2: the maximum penetration is about 3.9 mm (the first, fastest impact).
+    # The scipy reference's maximum penetration is about 3.9 mm (the first, fastest impact).
     assert abs(table2["max_penetration"][0] - 3.9e-3) <= 0.05e-3
 
 

@@ -1,4 +1,4 @@
-"""Property tests (hypothesis) of the exact model in the event mode (issue 4).
+"""Property tests (hypothesis) of the exact model in the event mode.
 
 Every example uses one compiled structure, the stress suite's (two walls, drag term present
 with k = 0, damping on, event mode, x and v at 2001 samples): hypothesis draws only traced

@@ -22,7 +22,7 @@ M = 2.7e-3
 
 
 def kv(e, t_c, m=M):
-    """Inverse Kelvin–Voigt map, written from SPEC §5."""
+    """Inverse Kelvin–Voigt map: κ = m(π² + ln²e)/t_c², k_r = −2 m ln e / t_c."""
     return m * (math.pi**2 + math.log(e) ** 2) / t_c**2, -2 * m * math.log(e) / t_c
 
 

@@ -23,9 +23,9 @@ def test_reproduce_quick(tmp_path, capsys):
     assert "## Table 2: the coupling, literal constants, reading paper" in summary
     claims = [line for line in text.splitlines() if line.startswith(("PASS", "FAIL"))]
     assert len(claims) == 10
-    # The verdicts follow from the physics (SPEC §8, SPEC-coupling): the ball's three claims
-    # hold (the upper-contact one only in its window); the stiff coupling reproduces all
-    # three trends; the literal constants fail two of them.
+    # The verdicts follow from the physics (README.md, "The rolling-mill coupling and
+    # `reproduce`"): the ball's three claims hold (the upper-contact one only in its window);
+    # the stiff coupling reproduces all three trends; the literal constants fail two of them.
 
     def verdicts(key):
         return [line[:4] for line in claims if key in line]
