@@ -357,7 +357,7 @@ class FitResult:
         unit = "ms" if self.data.observe == "impacts" else "mm"
         lines = ["[[Files]]" if len(self.datasets) > 1 else "[[Rows]]"]
         header = f"    {'file':<28} {'rows':>5} {'used':>5} {'outliers':>8} {'rms (' + unit + ')':>9}"
-        lines.append(header + ("   e alone" if len(self.datasets) > 1 else ""))
+        lines.append(header + ("   e alone (t_c prior)" if len(self.datasets) > 1 else ""))
         for e in self.datasets:
             name = os.path.basename(e["data"]) if e["data"] else "(in memory)"
             rms = f"{e['rms'] * 1e3:9.3g}" if e["rms"] is not None else f"{'-':>9}"
