@@ -301,3 +301,13 @@ def test_caches_filled_inside_a_transformation_keep_no_tracer():
     again = np.asarray(jax.vmap(inside)(jnp.array([1e4, 1e4]))[1])
     np.testing.assert_allclose(plain, first, rtol=0, atol=1e-13)
     np.testing.assert_allclose(again, first, rtol=0, atol=1e-11)  # vmap: rounding differs
+
+
+def test_a_time_stepping_solver_out_of_steps_points_to_the_event_mode():
+    """A stiff or resting contact costs a time-stepping solver about ω·t/3 steps; its
+    out-of-steps error says the event mode is the cheaper path (knobs of the solver used)."""
+    from jaxunilat._solvers import failure_hints
+
+    for method in ("tsit5",):
+        assert "solver='event'" in failure_hints(method)["max_steps"]
+    assert "solver='event'" not in failure_hints("event")["max_steps"]
