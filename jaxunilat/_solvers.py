@@ -167,7 +167,9 @@ def failure_hints(
         if method != "event":
             # A stiff contact, above all a ball at rest on a wall, costs about ω·t/3 steps of
             # any time-stepping solver; the event mode holds a resting contact in closed form.
-            cheaper.append(f"{spell('solver', 'event')} (a stiff or resting contact costs it far fewer steps)")
+            cheaper.append(
+                f"{spell('solver', 'event')} (a stiff or resting contact costs it far fewer steps)"
+            )
         steps = f"increase {spell('max_steps')}, loosen {tolerances}, " + (
             f"use {', '.join(cheaper)}, " if cheaper else ""
         )
