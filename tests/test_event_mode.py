@@ -24,9 +24,10 @@ MAX_STEPS = 8192
 MAX_EVENTS = 256
 ENTRY, EXIT, EXTREMUM = 1, 2, 3
 WALL_INDEX = {"lower": 0, "upper": 1}
-#: SPEC: the first five impact (contact onset) times of example 2 after t = 0, and x(2), v(2).
-SPEC_IMPACTS = np.array([0.121668, 0.263023, 0.442707, 0.645994, 0.943403])
-SPEC_X2, SPEC_V2 = -0.31366094434574779, 2.7757569948282916
+#: The scipy reference (tests/reference.py, DOP853 with event location, rtol 1e-13): the first
+#: five impact (contact onset) times of example 2 after t = 0, and x(2), v(2).
+REFERENCE_IMPACTS = np.array([0.121668, 0.263023, 0.442707, 0.645994, 0.943403])
+REFERENCE_X2, REFERENCE_V2 = -0.31366094434574779, 2.7757569948282916
 
 
 def event(model, y0, t1, tol, **kw):
@@ -60,11 +61,11 @@ def test_accuracy_example2_vs_scipy(ev_ex2, ref_ex2):
     err = max_dx(ev_ex2, ref_ex2)
     print(f"event mode 1e-10 vs scipy, example 2: max |dx| = {err:.3e} m")
     assert err <= 1e-8
-    # SPEC end state.
+    # The reference's end state.
     x1, v1 = np.asarray(ev_ex2.y1)
-    assert abs(x1 - SPEC_X2) <= 1e-8
-    assert abs(v1 - SPEC_V2) <= 1e-6
-    assert abs(float(ev_ex2.ys["x"][-1]) - SPEC_X2) <= 1e-8
+    assert abs(x1 - REFERENCE_X2) <= 1e-8
+    assert abs(v1 - REFERENCE_V2) <= 1e-6
+    assert abs(float(ev_ex2.ys["x"][-1]) - REFERENCE_X2) <= 1e-8
 
 
 def test_accuracy_drag_free_vs_closed_form():
@@ -127,8 +128,8 @@ def test_entry_and_exit_times_vs_scipy(ev_ex2, ref_ex2):
     assert d_in <= 1e-9 and d_out <= 1e-9
     np.testing.assert_array_equal(wall[ent], [r[1] for r in ref_in])
     np.testing.assert_array_equal(wall[ext], [r[1] for r in ref_out])
-    # SPEC: the first five impacts (given to 6 decimals).
-    np.testing.assert_allclose(t[ent][1:6], SPEC_IMPACTS, rtol=0, atol=6e-7)
+    # The reference's first five impacts (given to 6 decimals).
+    np.testing.assert_allclose(t[ent][1:6], REFERENCE_IMPACTS, rtol=0, atol=6e-7)
     # Extrema: deepest points carry the contact's wall index, apexes −1.
     assert np.all(wall[kind == EXTREMUM] >= -1)
 
@@ -330,7 +331,7 @@ def test_recorded_crossings_lie_on_the_wall_after_long_flight_steps():
 
 def test_shallow_excursion_beyond_a_wall_is_not_skipped():
     """A drag-free apex 1 µm beyond the upper wall: a parabola has a zero error estimate,
-    so an uncapped step could jump over the whole excursion (SPEC §3)."""
+    so an uncapped step could jump over the whole excursion."""
     g, lo, hi = 9.81, -0.4, 0.4
     v0 = math.sqrt(2 * g * (hi - lo + 1e-6))
     params = BallParams.table1(2, drag=None)
@@ -391,7 +392,7 @@ def test_root_finder_reaches_machine_precision_and_differentiates():
 def test_apex_height_gradient_vs_reference_finite_differences():
     """d(apex height after the first bounce)/d(κ, k_r, x0, v0) for a drop test with drag,
     against central differences of the scipy reference's exit speed and the drag closed
-    form for the apex, h = ln(1 + k²v²)/(2 g k²) above the surface (SPEC §8)."""
+    form for the apex, h = ln(1 + k²v²)/(2 g k²) above the surface."""
     k, g = 0.122, 9.81
 
     def ref_apex(p):

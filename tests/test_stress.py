@@ -1,4 +1,4 @@
-"""The numerical stress suite (issue 4): every run is accurate to its contract or a clear error.
+"""The numerical stress suite: every run is accurate to its contract or a clear error.
 
 `pytest -m stress` runs all configurations from `stress_configs.make_configs()` (500 by
 default, `JAXUNILAT_STRESS_N` to change); the default run checks a quick subset that
