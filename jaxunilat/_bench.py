@@ -11,7 +11,9 @@ repeated runs after a warm-up call (at least `Size.repeats`, more for fast calls
 `run_bench(size)` returns the `bench.json` dictionary; the `jaxunilat bench` command
 (`_cli_bench.py`) writes it with the figures (`_bench_plot.py`). The peers and the
 reference are in `_bench_peers.py`, the throughput scene and the sharded sweep's timing in
-`_bench_scale.py`, and the goals P1–P5 with their notes in `_bench_goals.py`.
+`_bench_scale.py`, the goals P7–P9 (measured on the users' own code: plain vmap, jax.grad,
+the command line's second run) in `_bench_user.py`, and the goals with their notes in
+`_bench_goals.py`. (There is no P6.)
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from . import _bench_peers as peers
+from . import _bench_peers as peers, _bench_user as user
 from ._bench_goals import P3_ERROR, goal_table as goal_table, goals
 from ._bench_scale import SAMPLES, T1, Y0
 
@@ -62,6 +64,13 @@ class Size:
     scale_out: bool = True  # the 1-device against 2-device subprocess
     identify_sets: int = 0  # bundled data sets to fit (the default one first)
     identify_runs: int = 1  # fits per data set (the first includes compilation)
+    # P7-P9 (`_bench_user`): P7's rows, and P9's commands (each run twice in fresh processes).
+    user_n: int = 1000
+    user_cli: tuple[str, ...] = ("simulate", "identify", "reproduce")
+    # The batch sizes of the throughput's second strategy (vmapped beside one by one);
+    # None: every one of `throughput_ns`; (): none (P7 still times plain vmap against
+    # rows one by one, on the users' scene).
+    compare_ns: tuple[int, ...] | None = None
     # Fast calls are repeated beyond `repeats` until this much time is spent (at most
     # `max_repeats` runs): on a shared VM single millisecond calls swing by 2x, and a
     # median of 5 can land on either mode.
@@ -119,6 +128,9 @@ SIZES = {
         error_checks=2,
         min_time_s=0.1,
         max_repeats=21,
+        user_n=100,
+        user_cli=("simulate", "identify"),  # reproduce --quick adds ~15 s: the full size runs it
+        compare_ns=(),  # ~20 s of compiles; P7 times plain vmap against rows one by one
     ),
     # Only for the test suite (hidden flag `--size tiny`): every section, smallest settings.
     "tiny": Size(
@@ -141,6 +153,8 @@ SIZES = {
         gradient=False,  # tests/test_event_mode.py checks event-mode gradients against FD
         scale_out=False,  # tests/test_sweep.py runs the 2-device sweep
         min_time_s=0.0,
+        user_n=4,
+        user_cli=("simulate",),
     ),
 }
 
@@ -231,6 +245,11 @@ def machine() -> dict:
         # XLA:CPU compiles loops touching fewer bytes per iteration into one kernel
         # (`use_loop_kernels`, which the command line calls); None: XLA's default (1 KiB).
         "loop_kernel_bytes": loop_kernel_bytes(),
+        # JAX's persistent compilation cache in this process (the command turns it off: the
+        # bench measures compile times; P9 measures the cache in child processes).
+        "compilation_cache_dir": (
+            jax.config.jax_compilation_cache_dir if jax.config.jax_enable_compilation_cache else None
+        ),
     }
 
 
@@ -408,7 +427,8 @@ def _throughput(size: Size, wp_rows, log) -> tuple[list[dict], dict]:
     fastest = one_by_one_fastest()
     last = None
     for one_by_one in (True, False) if fastest else (False,):
-        for n in size.throughput_ns:
+        compare = one_by_one != fastest and size.compare_ns is not None
+        for n in size.compare_ns if compare else size.throughput_ns:
             row = run_sweep(
                 n,
                 size.repeats if n < 1000 or (size.name == "full" and n < 10000) else 2,
@@ -446,6 +466,8 @@ def _throughput(size: Size, wp_rows, log) -> tuple[list[dict], dict]:
         errors.append(_error(last["x"][i], ref.x))
     checks["max_error_m"] = max(errors)
     checks["rows_checked"] = len(idx)
+    if fastest and size.compare_ns == ():
+        checks["vmapped"] = f"left out at size {size.name} (P7 times plain vmap against rows one by one)"
     # The scipy loop: the fastest peer whose example-2 error is <= 1e-8 m, over several pairs.
     ok = [r for r in wp_rows if r["peer"] and r["error"] <= P3_ERROR and "events" in r["method"]]
     if ok:
@@ -837,9 +859,10 @@ def _identification(size: Size, log) -> dict:
 def run_bench(size_name: str = "full", log: Callable[[str], None] = print) -> dict:
     """Run every section at `size_name` ("full", "quick" or "tiny") and return `bench.json`'s dict.
 
-    **Returns:** a dictionary with `machine`, `goals` (P1–P5), `work_precision`,
+    **Returns:** a dictionary with `machine`, `goals` (P1–P5, P7–P9), `work_precision`,
     `throughput` and further sections (`scale_out`, `gradient`, `compile_s`,
-    `no_retrace`, `static_structure`, `profile`, `reference_check`, `identification`).
+    `no_retrace`, `static_structure`, `profile`, `reference_check`, `identification`,
+    `user`: P7–P9's measurements and the code they time).
     """
     size = SIZES[size_name]
     ts = np.linspace(0.0, T1, SAMPLES)
@@ -870,6 +893,13 @@ def run_bench(size_name: str = "full", log: Callable[[str], None] = print) -> di
     result["profile"] = _profile(log)
     result["profile"]["per_step_fit"] = per_step_fit(project)
     result["identification"] = _identification(size, log)
+    log("the way users write code (P7-P9):")
+    result["user"] = {
+        "code": user.USER_CODE,
+        "vmap_against_rows": user.vmap_against_rows(size, _timed_together, log),
+        "reverse_against_forward": user.reverse_against_forward(size, _timed_together, log),
+        "command_line": user.command_line(size, log),
+    }
     result["goals"] = goals(result)
     result["total_s"] = time.perf_counter() - started
     return _clean(result)

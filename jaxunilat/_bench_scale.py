@@ -62,6 +62,11 @@ def trajectory(kappa, k_r):
     return sol.ys["x"], sol.status, sol.num_steps
 
 
+#: The option `host_devices` added to `XLA_FLAGS`, if any (the bench's child commands
+#: run without it, as users do).
+ADDED_XLA_FLAG: str | None = None
+
+
 def host_devices() -> int | None:
     """Give this process one CPU device per core, if JAX has not started yet (the
     benchmark command calls it first): `sweep` then shards rows over every core.
@@ -76,7 +81,12 @@ def host_devices() -> int | None:
     count = os.cpu_count() or 1
     if "xla_force_host_platform_device_count" in flags:
         return None
-    return count if add_xla_flags(f"{flags} --xla_force_host_platform_device_count={count}".strip()) else None
+    option = f"--xla_force_host_platform_device_count={count}"
+    if not add_xla_flags(f"{flags} {option}".strip()):
+        return None
+    global ADDED_XLA_FLAG
+    ADDED_XLA_FLAG = option
+    return count
 
 
 def one_by_one_fastest() -> bool:

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import json
 import math
+import os
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -17,7 +19,7 @@ import pytest
 from helpers import PAPER_Y0
 from reference import BallParams, closed_form_reference, parabola
 
-from jaxunilat import _bench, _bench_goals, _bench_peers as peers
+from jaxunilat import _bench, _bench_goals, _bench_peers as peers, _bench_scale, _bench_user
 from jaxunilat._cli import main
 
 TS = np.linspace(0.0, 2.0, 2001)
@@ -81,6 +83,69 @@ def test_ratio_goal_takes_the_fastest_run_within_the_error_bound():
     assert _bench_goals._ratio_goal("P1", rows[1:2] + rows[2:], 1e-9)["value"] is None
 
 
+def _user_section(sim_ratio=0.6):
+    return {
+        "vmap_against_rows": {
+            "n": 10,
+            "kappa_range": [8e3, 1.2e4],
+            "device": "cpu:0",
+            "scene": "s",
+            "ratio": 1.8,
+            "vmap_per_row_s": 1.8e-4,
+            "sequential_per_row_s": 1e-4,
+        },
+        "reverse_against_forward": {
+            "ratio": 4.0,
+            "loss": "l",
+            "scene": "s",
+            "forward_s": 1e-3,
+            "reverse_s": 4e-3,
+            "forward_mode_ratio": 1.8,
+        },
+        "command_line": {
+            "import_s": 1.0,
+            "commands": {
+                "simulate": {"first_s": 4.0, "second_s": 4.0 * sim_ratio, "ratio": sim_ratio},
+                "identify": {"first_s": 3.0, "second_s": 1.5, "ratio": 0.5},
+                "reproduce": {"status": "skipped at size quick (slow for this size)"},
+            },
+        },
+    }
+
+
+def test_user_goals_take_their_values_from_the_user_section():
+    goals = _bench_goals.user_goals(_user_section())
+    assert [goals[k]["value"] for k in ("P7", "P8", "P9")] == [1.8, 4.0, 0.6]
+    assert [goals[k]["met"] for k in ("P7", "P8", "P9")] == [False, True, False]
+    for goal in goals.values():
+        assert {"value", "target", "met", "unit", "measured", "reproduce"} <= set(goal)
+    assert goals["P8"]["forward_mode_ratio"] == 1.8
+    assert goals["P9"]["by_command"]["identify"] == 0.5
+    assert goals["P9"]["by_command"]["reproduce"].startswith("skipped")
+    # A failed command line run: no value, not met.
+    failed = _user_section()
+    failed["command_line"]["commands"]["simulate"] = {"first_s": 4.0, "second_s": None, "ratio": None}
+    assert _bench_goals.user_goals(failed)["P9"]["met"] is False
+
+
+def test_command_line_children_get_a_new_cache_and_the_users_environment(monkeypatch):
+    monkeypatch.setenv("JAXUNILAT_NO_CACHE", "1")  # as in this suite
+    flag = "--xla_force_host_platform_device_count=7"
+    monkeypatch.setenv("XLA_FLAGS", f"--xla_a=1 {flag}")
+    monkeypatch.setattr(_bench_scale, "ADDED_XLA_FLAG", flag)
+    env = _bench_user._child_env("/tmp/some-cache")
+    assert "JAXUNILAT_NO_CACHE" not in env
+    assert env["JAXUNILAT_CACHE_DIR"] == "/tmp/some-cache"
+    assert env["XLA_FLAGS"] == "--xla_a=1"
+    assert env["PYTHONPATH"].split(os.pathsep)[0] == str(Path(_bench_user.__file__).parents[1])
+
+
+def test_user_rows_span_kappa_plus_minus_20_percent():
+    kappas = _bench_user.kappa_rows(5)
+    assert kappas[0] == pytest.approx(0.8e4) and kappas[-1] == pytest.approx(1.2e4)
+    assert kappas[2] == pytest.approx(1e4)
+
+
 def test_bench_without_scipy_fails_with_one_line(monkeypatch, tmp_path, capsys):
     monkeypatch.setitem(__import__("sys").modules, "scipy", None)  # `import scipy` raises ImportError
     code = main(["bench", "--quick", "--out", str(tmp_path / "b")])
@@ -96,7 +161,7 @@ def test_bench_tiny_end_to_end(tmp_path, capsys):
     out = tmp_path / "bench"
     assert main(["bench", "--size", "tiny", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
-    for key in ("P1", "P2", "P3", "P4", "P5"):
+    for key in ("P1", "P2", "P3", "P4", "P5", "P7", "P8", "P9"):
         assert f"\n{key} " in printed
     for name in ("work_precision.png", "throughput.png"):
         assert (out / name).stat().st_size > 10_000
@@ -104,10 +169,11 @@ def test_bench_tiny_end_to_end(tmp_path, capsys):
 
     # Schema.
     assert {"machine", "goals", "work_precision", "throughput"} <= set(result)
-    for key in ("P1", "P2", "P3", "P4", "P5"):
+    for key in ("P1", "P2", "P3", "P4", "P5", "P7", "P8", "P9"):
         goal = result["goals"][key]
         assert {"value", "target", "met", "unit"} <= set(goal)
         assert isinstance(goal["met"], bool)
+    assert "P6" not in result["goals"]
     for row in result["work_precision"]:
         assert {"method", "setting", "error", "wall_s", "compile_s", "peer"} <= set(row)
     for row in result["throughput"]:
@@ -146,3 +212,24 @@ def test_bench_tiny_end_to_end(tmp_path, capsys):
     assert math.isclose(result["goals"]["P1"]["value"], mine / best_peer, rel_tol=1e-12)
     assert result["goals"]["P3"]["ratio_vs_scipy_loop"] > 0
     assert "identification" in result
+
+    # P7-P9, measured on the users' code (no assertion on the timings themselves).
+    for key in ("P7", "P8", "P9"):
+        goal = result["goals"][key]
+        assert {"measured", "reproduce"} <= set(goal)
+        assert math.isfinite(goal["value"]) and goal["value"] > 0
+    user = result["user"]
+    assert "jax.jit(jax.vmap(f))" in user["code"] and "jax.grad(loss)" in user["code"]
+    vm = user["vmap_against_rows"]
+    assert vm["n"] == 4
+    assert {"vmap_s", "sequential_s", "vmap_per_row_s", "sequential_per_row_s", "ratio"} <= set(vm)
+    assert vm["max_abs_difference_m"] <= 1e-9  # vmapped and one by one: the same rows
+    grad = user["reverse_against_forward"]
+    assert {"forward_s", "reverse_s", "forward_mode_s", "ratio", "forward_mode_ratio"} <= set(grad)
+    assert math.isfinite(grad["forward_mode_ratio"]) and grad["impacts"] >= 3
+    assert grad["modes_max_rel_difference"] <= 1e-6  # jax.grad and jax.jacfwd agree
+    assert result["goals"]["P8"]["forward_mode_ratio"] == grad["forward_mode_ratio"]
+    sim = user["command_line"]["commands"]["simulate"]
+    assert sim["ok"] is True and [r["returncode"] for r in sim["runs"]] == [0, 0]
+    assert sim["runs"][0]["cache_files"] > 0  # the first run filled the new cache
+    assert user["command_line"]["commands"]["reproduce"]["status"].startswith("skipped")
