@@ -15,7 +15,7 @@ from ._contact import AbstractContactLaw, ClampedKelvinVoigt, HuntCrossley, Kelv
 from ._flight import apex_rise, apex_time, fall_time, flight_state, longest_fall, rise_time
 from ._heaviside import AbstractHeaviside, Exact
 from ._model import AbstractModel
-from ._validate import check_range, check_type, float_field, is_concrete, runtime_check
+from ._validate import float_field, is_concrete
 
 #: A closed-form flight whose apex is within this many ulps of the upper wall grazes it
 #: without contact (see `Ball.flight_events`).
@@ -109,16 +109,7 @@ class Ball(AbstractModel):
         return [(name, value, kw) for name, value, kw in ranges if value is not None]
 
     def __check_init__(self):
-        check_type("heaviside", self.heaviside, AbstractHeaviside, "Exact(), Logistic(eps) or Softplus(eps)")
-        check_type(
-            "law", self.law, AbstractContactLaw, "KelvinVoigt(), HuntCrossley(n) or ClampedKelvinVoigt()"
-        )
-        for name, value, kw in self._ranges():
-            check_range(name, value, **kw)
-
-    def runtime_checks(self):
-        """Each parameter's range, checked at run time when it is traced (`simulate`)."""
-        return [runtime_check(name, value, **kw) for name, value, kw in self._ranges()]
+        self._check_fields()
 
     @classmethod
     def table1(cls, example: int = 2, **overrides) -> Ball:

@@ -40,7 +40,7 @@ from jaxtyping import Array
 from ._contact import AbstractContactLaw, ClampedKelvinVoigt, KelvinVoigt, rk4_step_limit
 from ._heaviside import AbstractHeaviside, Exact
 from ._model import AbstractModel
-from ._validate import check_choice, check_range, check_type, float_field, runtime_check
+from ._validate import check_choice, float_field
 
 #: The paper's constants [K90 §5.2]: mass (kg), length l (m), diameter d (m), lever l_p (m),
 #: spin-up rate a (1/s), c (dimensionless), gravity (m/s²).
@@ -162,16 +162,7 @@ class Coupling(AbstractModel):
 
     def __check_init__(self):
         check_choice("reading", self.reading, READINGS)
-        check_type("heaviside", self.heaviside, AbstractHeaviside, "Exact(), Logistic(eps) or Softplus(eps)")
-        check_type(
-            "law", self.law, AbstractContactLaw, "KelvinVoigt(), HuntCrossley(n) or ClampedKelvinVoigt()"
-        )
-        for name, value, kw in self._ranges():
-            check_range(name, value, **kw)
-
-    def runtime_checks(self):
-        """Each parameter's range, checked at run time when it is traced (`simulate`)."""
-        return [runtime_check(name, value, **kw) for name, value, kw in self._ranges()]
+        self._check_fields()
 
     @classmethod
     def table2(

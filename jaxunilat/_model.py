@@ -29,11 +29,31 @@ class AbstractModel(eqx.Module):
     def output(self, name: str, t: Array, y: Array) -> Array:
         """One named output (see `output_names`) at time t and state y."""
 
+    def _ranges(self) -> list[tuple[str, object, dict]]:
+        """`(name, value, check_range keywords)` per parameter with a valid range."""
+        return []
+
+    def _check_fields(
+        self, law_types: str = "KelvinVoigt(), HuntCrossley(n) or ClampedKelvinVoigt()"
+    ) -> None:
+        """The concrete checks of a model with `heaviside` and `law` fields and `_ranges`:
+        their types, then every range (`check_range` skips traced values)."""
+        from ._contact import AbstractContactLaw
+        from ._heaviside import AbstractHeaviside
+        from ._validate import check_range, check_type
+
+        check_type("heaviside", self.heaviside, AbstractHeaviside, "Exact(), Logistic(eps) or Softplus(eps)")
+        check_type("law", self.law, AbstractContactLaw, law_types)
+        for name, value, kw in self._ranges():
+            check_range(name, value, **kw)
+
     def runtime_checks(self) -> list[tuple[str, Array]]:
         """`(message, valid)` per parameter check, for traced parameters (see
         `jaxunilat._validate.runtime_check`): what `__check_init__` checks on concrete
         values, which `simulate` evaluates once before the solve."""
-        return []
+        from ._validate import runtime_check
+
+        return [runtime_check(name, value, **kw) for name, value, kw in self._ranges()]
 
     def check_initial_state(self, y0) -> None:
         """Raise `ValueError` naming the component when a concrete initial state is
