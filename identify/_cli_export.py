@@ -57,7 +57,7 @@ def add_export(commands) -> None:
 
 
 def _run_export_mujoco(args) -> int:
-    from jaxunilat._cli import EXIT_OK, PROG
+    from jaxunilat.internal import EXIT_OK, PROG
 
     from ._export import DEFAULT_IMPEDANCE, mujoco_contact
 

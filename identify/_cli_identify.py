@@ -85,8 +85,7 @@ EXIT_NOT_CONVERGED = 3
 def _run_identify(args) -> int:
     import json
 
-    from jaxunilat._cli import EXIT_OK, RunError
-    from jaxunilat._io import check_output_paths
+    from jaxunilat.internal import EXIT_OK, RunError, check_output_paths
 
     from ._data import load_dataset
     from ._fit import fit
@@ -122,7 +121,7 @@ def _run_identify(args) -> int:
                 json.dump(result.to_json_dict(), fh, indent=2, allow_nan=False)
             print(f"wrote {args.json}")
         if args.plot is not None:
-            from jaxunilat._plot import save_figure
+            from jaxunilat import save_figure
 
             from ._plot import plot_fit
 

@@ -120,8 +120,7 @@ def add_import(commands) -> None:
 
 
 def _run_import(args) -> int:
-    from jaxunilat._cli import EXIT_OK, RunError
-    from jaxunilat._io import check_output_paths
+    from jaxunilat.internal import EXIT_OK, RunError, check_output_paths
 
     check_output_paths(("--out", args.out), ("--plot", args.plot), inputs=(("SOURCE", args.source),))
     if args.plot is not None:
@@ -154,7 +153,7 @@ def _run_import(args) -> int:
         result.write(args.out, overwrite=True)
         print(f"{'wrote':<10} {args.out} ({result.dataset.observe}: {result.dataset.num_rows} rows)")
         if args.plot is not None:
-            from jaxunilat._plot import save_figure
+            from jaxunilat import save_figure
 
             if args.source_kind == "wav":
                 from ._import_audio import plot_detection as plot

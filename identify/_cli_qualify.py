@@ -60,8 +60,7 @@ def _run_qualify(args) -> int:
     import json
     import time
 
-    from jaxunilat._cli import EXIT_OK, RunError, UsageError
-    from jaxunilat._io import check_output_paths
+    from jaxunilat.internal import EXIT_OK, RunError, UsageError, check_output_paths
 
     from ._qualify import qualify, qualify_fit
 

@@ -59,7 +59,7 @@ import os
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
-from jaxunilat._validate import check_choice, check_range
+from jaxunilat.internal import check_choice, check_range
 
 MODES = ("direct", "standard")
 MATCHES = ("law", "rebound")

@@ -43,7 +43,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from jaxunilat._validate import check_choice, check_range
+from jaxunilat.internal import check_choice, check_range
 
 from ._initial import CONTACT_TIME_GUESS
 from ._joint import Layout

@@ -121,7 +121,7 @@ class ImportResult:
     def write(self, path, *, overwrite: bool = False) -> None:
         """Write `text()` to `path` (refuses to replace a file unless `overwrite`, and
         never writes over the source)."""
-        from jaxunilat._io import check_output_paths
+        from jaxunilat.internal import check_output_paths
 
         name = os.fspath(path)
         check_output_paths(("path", name), inputs=(("source", self.source),))
@@ -147,7 +147,7 @@ def _with_comments(text: str, comments: list[str]) -> str:
 
 def check_options(*, mass, drag, x0, v0, noise) -> None:
     """Validate the metadata options (None: the default); `ValueError` names the flag."""
-    from jaxunilat._validate import check_range
+    from jaxunilat.internal import check_range
 
     check_range("mass", mass, lo=0.0, lo_open=True, unit="kg", allow_none=True)
     check_range("drag", drag, lo=0.0, unit="s/m", allow_none=True)

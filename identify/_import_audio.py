@@ -267,7 +267,7 @@ def detect_onsets(
 
     **Returns:** an `OnsetDetection`.
     """
-    from jaxunilat._validate import check_range
+    from jaxunilat.internal import check_range
 
     check_range("rate", rate, lo=0.0, lo_open=True, unit="Hz")
     check_range("threshold", threshold, lo=0.0, lo_open=True)

@@ -534,7 +534,7 @@ def import_video(
 
     **Returns:** an `ImportResult` (observe = trace: `t` in s, `x` in m).
     """
-    from jaxunilat._validate import check_range
+    from jaxunilat.internal import check_range
 
     check_options(mass=mass, drag=drag, x0=x0, v0=v0, noise=noise)
     check_range("scale", scale, lo=0.0, lo_open=True, unit="m per unit", allow_none=True)

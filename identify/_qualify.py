@@ -34,7 +34,7 @@ import os
 
 import numpy as np
 
-from jaxunilat._validate import check_range
+from jaxunilat.internal import check_range
 
 #: The ITTF ball test: mass (kg), drop height (m), pass window (m), and drag (s/m).
 ITTF_MASS = 2.7e-3

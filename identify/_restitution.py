@@ -39,9 +39,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxunilat
-from jaxunilat._event import EXIT
-from jaxunilat._simulate import Status
-from jaxunilat._validate import check_choice, check_finite, check_range
+from jaxunilat import Status
+from jaxunilat.internal import EXIT, check_choice, check_finite, check_range
 
 # -- per-bounce restitution from onset times ------------------------------------------------
 

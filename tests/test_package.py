@@ -22,3 +22,26 @@ def test_importing_loads_neither_matplotlib_nor_scipy():
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120
     )
     assert out.stdout.strip() == "[]"
+
+
+def test_identify_uses_only_the_public_api_and_jaxunilat_internal():
+    """The two packages depend one way: identify imports jaxunilat's public names and
+    `jaxunilat.internal`, never a private module (parsed, so strings and comments do not
+    count)."""
+    import ast
+    import pathlib
+
+    root = pathlib.Path(__file__).resolve().parent.parent / "identify"
+    private = []
+    for path in sorted(root.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            names = []
+            if isinstance(node, ast.ImportFrom) and node.module:
+                names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            for name in names:
+                parts = name.split(".")
+                if parts[0] == "jaxunilat" and any(p.startswith("_") for p in parts[1:]):
+                    private.append(f"{path.name}:{node.lineno}: {name}")
+    assert private == []
