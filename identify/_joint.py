@@ -29,6 +29,8 @@ import math
 import jax
 import numpy as np
 
+from jaxunilat import hunt_crossley_contact_time
+
 from ._initial import CONTACT_TIME_GUESS
 from ._problem import PARAMETERS, Problem, evaluate_rows, stack_problems
 
@@ -86,10 +88,6 @@ class Layout:
         """(files, 6): every file's z_f."""
         return np.asarray(z)[self.index]
 
-    def indices_of(self, name: str) -> list[int]:
-        """The joint entries of one parameter (one if shared, one per file if local)."""
-        return sorted({int(i) for i in self.index[:, PARAMETERS.index(name)]})
-
 
 @dataclasses.dataclass
 class Group:
@@ -140,10 +138,6 @@ class JointEvaluator:
     calls: int = 0
     transforms: dict = dataclasses.field(default_factory=dict)
 
-    @property
-    def n_data(self) -> int:
-        return int(sum(sum(g.rows) for g in self.groups))
-
     def _file_columns(self, f: int) -> tuple[list[int], list[int]]:
         """Free joint entries file f depends on: (differenced, shifts)."""
         idx = self.layout.index[f]
@@ -159,11 +153,6 @@ class JointEvaluator:
         """Runs per file in a compiled call: the point and two neighbours per differenced entry."""
         return 1 + 2 * max(len(self._file_columns(f)[0]) for f in range(self.layout.n_files))
 
-    @property
-    def differenced(self) -> list[int]:
-        """The free joint entries whose columns are central differences."""
-        return [j for j in self.free if self.layout.names()[j][0] not in SHIFTS]
-
     def _prior_pairs(self) -> list[tuple[int, int, int]]:
         """(file, κ index, k_r index) of every distinct contact-parameter pair."""
         seen, out = set(), []
@@ -174,13 +163,13 @@ class JointEvaluator:
                 out.append((f, *pair))
         return out
 
+    def _prior_row(self, f: int, log_kappa: float, log_k_r: float) -> float:
+        t_c = contact_time_of(self.law, log_kappa, log_k_r, float(self.masses[f]), self.speed, floor=True)
+        return (math.log(max(t_c, 1e-300)) - math.log(CONTACT_TIME_GUESS)) / PRIOR_SD
+
     def prior_rows(self, z: np.ndarray) -> np.ndarray:
         """The steering prior's residuals (log t_c − log t_c,prior)/sd."""
-        out = []
-        for f, ik, ir in self._prior_pairs():
-            t_c = contact_time_of(self.law, z[ik], z[ir], float(self.masses[f]), self.speed, floor=True)
-            out.append((math.log(max(t_c, 1e-300)) - math.log(CONTACT_TIME_GUESS)) / PRIOR_SD)
-        return np.asarray(out)
+        return np.asarray([self._prior_row(f, z[ik], z[ir]) for f, ik, ir in self._prior_pairs()])
 
     def _run(self, per_file_rows: list[np.ndarray]) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Residuals (rows, n_f) and ok (rows,) of every file for its (rows, 6) points."""
@@ -234,19 +223,16 @@ class JointEvaluator:
             jac = np.concatenate([jac, self._prior_jacobian(z)])
         return r, jac, ok
 
-    def _prior_jacobian(self, z: np.ndarray) -> np.ndarray:
-        rows = []
-        for _, ik, ir in self._prior_pairs():
-            row = np.zeros(len(self.free))
-            for j in (ik, ir):
+    def _prior_jacobian(self, z: np.ndarray, h: float = 1e-6) -> np.ndarray:
+        """Central differences of each prior row in its own κ and k_r entries."""
+        jac = np.zeros((len(self._prior_pairs()), len(self.free)))
+        for row, (f, ik, ir) in enumerate(self._prior_pairs()):
+            for j, (dk, dr) in ((ik, (h, 0.0)), (ir, (0.0, h))):
                 if j in self.free:
-                    h = 1e-6
-                    zp, zm = z.copy(), z.copy()
-                    zp[j] += h
-                    zm[j] -= h
-                    row[self.free.index(j)] = (self.prior_rows(zp) - self.prior_rows(zm))[len(rows)] / (2 * h)
-            rows.append(row)
-        return np.asarray(rows).reshape(len(rows), len(self.free))
+                    up = self._prior_row(f, z[ik] + dk, z[ir] + dr)
+                    down = self._prior_row(f, z[ik] - dk, z[ir] - dr)
+                    jac[row, self.free.index(j)] = (up - down) / (2 * h)
+        return jac
 
     def _transformed(self, f: int, r: np.ndarray) -> np.ndarray:
         if f not in self.transforms:
@@ -283,10 +269,7 @@ def contact_time_of(
     time at impact speed `speed` (m/s)."""
     kappa, k_r = math.exp(log_kappa), math.exp(log_k_r)
     if law == "hunt-crossley":
-        n1 = 2.5
-        dmax = (n1 * mass * speed**2 / (2.0 * kappa)) ** (1.0 / n1)
-        integral = math.sqrt(math.pi) * math.gamma(1.0 + 1.0 / n1) / math.gamma(0.5 + 1.0 / n1)
-        return 2.0 * dmax / speed * integral
+        return hunt_crossley_contact_time(kappa, mass, speed)
     omega2 = kappa / mass - (k_r / (2 * mass)) ** 2
     if floor:
         omega2 = max(omega2, 1e-300)

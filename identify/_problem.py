@@ -162,14 +162,11 @@ def _nearest(predicted: Array, observed: Array) -> Array:
 def evaluate_rows(problem: Problem, zs) -> tuple[Array, Array]:
     """Residuals for each row of `zs`, in one compiled sequential map.
 
-    `problem` is one data set with `zs` of shape (rows, 6), or a stack of data sets
-    of one structure (`stack_problems`: every array leaf with a leading file axis)
-    with `zs` of shape (files, rows, 6). This is the package's jitted entry point:
-    the fit calls it with a fixed number of rows (the current point and its
-    finite-difference neighbours), so only the first call compiles.
+    `problem` is a stack of data sets of one structure (`stack_problems`: every array
+    leaf with a leading file axis) and `zs` has shape (files, rows, 6). This is the
+    package's jitted entry point: the fit calls it with a fixed number of rows (each
+    file's point and its finite-difference neighbours), so only the first call compiles.
     """
-    if zs.ndim == 2:
-        return jax.lax.map(problem.residuals, zs)
     # One flat map over (file, row) pairs: a nested map would keep the inner solves
     # from compiling into one loop kernel each.
     files, rows = zs.shape[:2]

@@ -180,7 +180,7 @@ def noise_statement(d_observe: str, sigma_known: bool, stated, scatter: float, g
     elif goodness["consistent"]:
         verdict = "consistent"
         text = f"residual scatter {show(scatter)}, consistent with the stated {show(stated)}"
-    elif goodness["p_value"] is not None and goodness["p_value"] < P_INCONSISTENT:
+    else:  # the χ² test against the stated σ failed (p < P_INCONSISTENT)
         verdict = "understated"
         text = f"residual scatter {show(scatter)} against a stated {show(stated)}"
         if d_observe == "impacts" and len(times) > 2:
@@ -194,9 +194,6 @@ def noise_statement(d_observe: str, sigma_known: bool, stated, scatter: float, g
         else:
             verdict = "misfit"
             text += "; far more than bounce-to-bounce scatter explains: the model does not fit"
-    else:
-        verdict = "consistent"
-        text = f"residual scatter {show(scatter)}, consistent with the stated {show(stated)}"
     if sigma_known and _overstated(goodness):
         verdict = "overstated"
         text = (

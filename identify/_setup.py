@@ -68,6 +68,10 @@ class Setup:
     def n_rows(self) -> list[int]:
         return [len(t) for t in self.times]
 
+    def per_row(self, values) -> np.ndarray:
+        """One value per file (e.g. `sigmas`) repeated over that file's data rows."""
+        return np.repeat(np.asarray(values, dtype=float), self.n_rows)
+
 
 def _noise(datasets) -> tuple[bool, np.ndarray]:
     stated = [d.noise for d in datasets]
@@ -116,8 +120,6 @@ def _file_values(d, initial: dict, nuisance: tuple[str, ...]) -> tuple[dict, flo
         horizon = fall + 1.05 * float(np.sum(flights)) + 0.05
         if d.t is not None:
             horizon = max(horizon, float(d.t[-1]) + 0.6 * float(flights[-1]) + 0.05)
-    elif "offset" in nuisance and "offset" not in initial:
-        values["offset"] = 0.0
     return values, horizon
 
 

@@ -160,12 +160,11 @@ def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale, onset
     if not converged or noise["verdict"] == "misfit":
         identifiable = {name: False for name in identifiable}
     alone = alone_restitution(setup, best, rows, opts) if setup.layout.n_files > 1 else None
+    row_sigma = setup.per_row(setup.sigmas)
+    residuals = r_data * row_sigma  # prediction − data, in the data's units
     holdout = None
     if opts.holdout > 0:
-        data_units = r_data * np.concatenate(
-            [np.full(k, s) for k, s in zip(setup.n_rows, setup.sigmas, strict=True)]
-        )
-        holdout = _holdout(setup, rows, r_fit, jac, cov, s2, data_units, opts.holdout, scatter_model)
+        holdout = _holdout(setup, rows, r_fit, jac, cov, s2, residuals, opts.holdout, scatter_model)
     chi2 = float(np.sum(r_fit[keep] ** 2))
     return FitResult(
         data=d0,
@@ -177,8 +176,7 @@ def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale, onset
         identifiable=identifiable,
         correlation=corr,
         cost=float(best.cost),
-        residuals=r_data
-        * np.concatenate([np.full(k, s) for k, s in zip(setup.n_rows, setup.sigmas, strict=True)]),
+        residuals=residuals,
         chi2=chi2,
         sigma=float(sigma_used[0]),
         sigma_source="restitution scatter" if scatter_model else "residuals" if estimate else "file",
@@ -206,7 +204,7 @@ def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale, onset
         joint_z=np.asarray(best.z),
         datasets_data=list(setup.datasets),
         notes=[note for d in setup.datasets for note in plausibility_notes(d)],
-        row_sigma=np.concatenate([np.full(k, s) for k, s in zip(setup.n_rows, setup.sigmas, strict=True)]),
+        row_sigma=row_sigma,
         sigma_known=setup.sigma_known,
     )
 
@@ -220,11 +218,7 @@ def _holdout(setup, rows, r_fit, jac, cov, s2, data_units, fraction, scatter_mod
     finite = np.where(np.isfinite(cov), cov, 0.0)
     variance = 1.0 + np.einsum("ij,jk,ik->i", jac, finite, jac) / s2
     unit = "s" if setup.datasets[0].observe == "impacts" else "m"
-    sigma = np.sqrt(s2) * (
-        np.ones(len(r_fit))
-        if scatter_model
-        else np.concatenate([np.full(k, v) for k, v in zip(setup.n_rows, setup.sigmas, strict=True)])
-    )
+    sigma = np.sqrt(s2) * (np.ones(len(r_fit)) if scatter_model else setup.per_row(setup.sigmas))
     scale = 1.0 if scatter_model else sigma
     return holdout_summary(r_fit * scale, rows, sigma, fraction, unit, variance, reported=data_units)
 
