@@ -49,7 +49,15 @@ from ._initial import CONTACT_TIME_GUESS
 from ._joint import Layout
 from ._problem import LAWS, LOG_PARAMETERS, NUISANCE, PARAMETERS
 from ._result import FitResult
-from ._robust import THRESHOLD, RatioResiduals, Rows, cauchy_weights, flag_outliers, robust_scale
+from ._robust import (
+    THRESHOLD,
+    RatioResiduals,
+    Rows,
+    cauchy_weights,
+    fitted_count,
+    flag_outliers,
+    robust_scale,
+)
 from ._setup import build, start_point, start_points
 from ._summary import derived_quantities, summarize_fit
 from ._uncertainty import Z95, covariance, goodness_of_fit
@@ -186,6 +194,10 @@ class _Point:
         z, r, jac, cost, it, converged, why = out
         return cls(z, r, jac, cost, iterations + it, converged, why, gradient_steps)
 
+    def then(self, out) -> _Point:
+        """The point a further LM stage `out` reached, its iterations added to these."""
+        return _Point.from_lm(out, iterations=self.iterations, gradient_steps=self.gradient_steps)
+
 
 def _load_all(data) -> list:
     if isinstance(data, (list, tuple)):
@@ -315,7 +327,7 @@ def _check_arguments(
     check_range("holdout", holdout, lo=0.0, hi=1.0, hi_open=True, unit="")
     if holdout > 0:
         for d in datasets:
-            keep = d.num_rows - int(math.floor(holdout * d.num_rows + 1e-9))
+            keep = fitted_count(d.num_rows, holdout)
             if keep < MIN_FITTED[d.observe] or keep == d.num_rows:
                 raise ValueError(
                     f"holdout = {holdout!r} leaves {keep} of {d.num_rows} rows of {d.path or 'a data set'} to fit "
@@ -359,7 +371,7 @@ def _fit_law(setup, opts: _Options) -> FitResult:
     best = min(runs, key=lambda run: run.cost)
     for fraction in _windows(setup)[1:]:
         out = _lm(setup, best.z, _weights(setup, rows, fraction), opts, dchi2=1e-2)
-        best = _Point.from_lm(out, iterations=best.iterations, gradient_steps=best.gradient_steps)
+        best = best.then(out)
     scale = None
     if not opts.keep_outliers:
         best, rows, scale = _robust_pass(setup, best, rows, opts)
@@ -514,11 +526,7 @@ def _robust_pass(setup, best: _Point, rows, opts):
     point = best
     for _ in range(3):
         w = _weights(setup, rows, robust=cauchy_weights(point.r[:n], scale))
-        point = _Point.from_lm(
-            _lm(setup, point.z, w, opts, dchi2=1e-2),
-            iterations=point.iterations,
-            gradient_steps=point.gradient_steps,
-        )
+        point = point.then(_lm(setup, point.z, w, opts, dchi2=1e-2))
         scale = robust_scale(point.r[:n], rows.fitted, floor=floor)
     outlier = flag_outliers(point.r[:n], rows, scale, opts.threshold)
     if outlier.sum() > MAX_OUTLIER_FRACTION * (~rows.holdout).sum():
@@ -552,13 +560,8 @@ def _final_pass(setup, best: _Point, rows, opts) -> _Point:
         ev.prior = use_prior
     # The tight pass may have to follow the long κ–k_r–t_c valley of a joint fit: it
     # gets four times the iterations of the loose stages.
-    point = _Point.from_lm(
-        _lm(
-            setup, z, _weights(setup, rows), dataclasses.replace(opts, max_iterations=4 * opts.max_iterations)
-        ),
-        iterations=best.iterations,
-        gradient_steps=best.gradient_steps,
-    )
+    longer = dataclasses.replace(opts, max_iterations=4 * opts.max_iterations)
+    point = best.then(_lm(setup, z, _weights(setup, rows), longer))
     if use_prior:
         ev.prior = False
         r, jac, _ = ev(point.z)

@@ -24,6 +24,7 @@ their own.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import jax
@@ -58,9 +59,9 @@ class Layout:
         """Length of the joint vector."""
         return len(self.shared) + self.n_files * len(self.local)
 
-    @property
+    @functools.cached_property
     def index(self) -> np.ndarray:
-        """(files, 6) joint indices: z_f = z[index[f]]."""
+        """(files, 6) joint indices: z_f = z[index[f]] (computed once: every evaluation reads it)."""
         out = np.zeros((self.n_files, len(PARAMETERS)), dtype=int)
         for f in range(self.n_files):
             for i, name in enumerate(PARAMETERS):

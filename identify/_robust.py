@@ -60,6 +60,11 @@ def cauchy_weights(r: np.ndarray, scale: float) -> np.ndarray:
     return 1.0 / np.sqrt(1.0 + (r / (CAUCHY_C * scale)) ** 2)
 
 
+def fitted_count(n: int, holdout: float) -> int:
+    """How many of a file's n rows a fit keeps when the last `holdout` fraction is held out."""
+    return n - int(math.floor(holdout * n + 1e-9))
+
+
 @dataclasses.dataclass
 class Rows:
     """Which data rows a stage uses, per file, as boolean masks over the concatenated rows.
@@ -77,7 +82,7 @@ class Rows:
         offsets = np.concatenate([[0], np.cumsum(n_rows)])
         held = np.zeros(int(offsets[-1]), bool)
         for f, n in enumerate(n_rows):
-            keep = n - int(math.floor(holdout * n + 1e-9)) if holdout > 0 else n
+            keep = fitted_count(n, holdout)
             held[offsets[f] + keep : offsets[f + 1]] = True
         return cls(offsets=offsets, holdout=held, outlier=np.zeros_like(held))
 
