@@ -415,7 +415,7 @@ def phyphox_throws(rngs: dict | None = None) -> list[dict]:
         timing = PHYPHOX_TIMING
         heard = onset + timing["noise"] * rng.standard_normal(total)
         heard = np.round(heard * timing["rate"]) / timing["rate"]
-        rows, kind, index, missed = list(heard[: spec["bounces"]]), ["bounce"] * spec["bounces"], [], []
+        rows, kind, missed = list(heard[: spec["bounces"]]), ["bounce"] * spec["bounces"], []
         index = list(range(spec["bounces"]))
         if "faulty_ending" in spec:
             missed.append(spec["bounces"])  # too quiet: no row

@@ -19,7 +19,10 @@ _X0_IMPACTS = (
 )
 
 
-def _common(p, *, x0_help: str, noise_help: str) -> None:
+def _source_kind(sources, kind: str, *, source_help: str, x0_help: str, noise_help: str, **parser_kw):
+    """Add the `import KIND` subparser: SOURCE, the options every importer takes, `_run_import`."""
+    p = sources.add_parser(kind, **parser_kw)
+    p.add_argument("source", metavar="SOURCE", help=source_help)
     p.add_argument(
         "--out", metavar="DATA.csv", required=True, help="the data file to write (replaced if it exists)"
     )
@@ -29,6 +32,8 @@ def _common(p, *, x0_help: str, noise_help: str) -> None:
     p.add_argument("--v0", type=float, help="velocity at t = 0, m/s (default 0: released from rest)")
     p.add_argument("--noise", type=float, metavar="S", help=noise_help)
     p.add_argument("--plot", metavar="PNG", help="draw what was imported (kept and rejected onsets)")
+    p.set_defaults(func=_run_import)
+    return p
 
 
 def add_import(commands) -> None:
@@ -42,8 +47,12 @@ def add_import(commands) -> None:
     )
     sources = p.add_subparsers(dest="source_kind", metavar="SOURCE_KIND", required=True, parser_class=type(p))
 
-    w = sources.add_parser(
+    w = _source_kind(
+        sources,
         "wav",
+        source_help="the WAV file (only read)",
+        x0_help=_X0_IMPACTS,
+        noise_help="onset-time standard deviation, s (default: the timing-noise estimate)",
         help="impact onsets from a WAV recording of a bouncing ball",
         description="Detect the impact clicks in a WAV file (PCM 16/24/32-bit or float 32/64-bit, mono or "
         "stereo, 8-96 kHz): coarse detection above THRESHOLD x the robust noise floor with a dead time, then "
@@ -52,12 +61,6 @@ def add_import(commands) -> None:
         "smoothly) and echoes closer than MIN_GAP to a louder click are rejected and reported. Writes "
         "observe = impacts; noise defaults to the timing-noise estimate (the scatter of the intervals about "
         "a smooth fit, /sqrt(2), at least one sample period).",
-    )
-    w.add_argument("source", metavar="SOURCE", help="the WAV file (only read)")
-    _common(
-        w,
-        x0_help=_X0_IMPACTS,
-        noise_help="onset-time standard deviation, s (default: the timing-noise estimate)",
     )
     w.add_argument(
         "--threshold", type=float, default=8.0, help="coarse detection level, in noise sigma (default 8)"
@@ -74,10 +77,13 @@ def add_import(commands) -> None:
         default=0.03,
         help="s; a click closer than this to a louder one is an echo or double trigger (default 0.03)",
     )
-    w.set_defaults(func=_run_import)
 
-    ph = sources.add_parser(
+    _source_kind(
+        sources,
         "phyphox",
+        source_help="the export, .csv or .xlsx (only read)",
+        x0_help=_X0_IMPACTS,
+        noise_help="onset-time standard deviation, s (default: none, so a fit estimates it from its residuals)",
         help="impact onsets from a phyphox Acoustic Stopwatch or (In)elastic collision export",
         description="Read a phyphox export (CSV with comma, semicolon or tab separators and decimal point or "
         "comma, detected; or .xlsx with openpyxl): the event-time column if present, else the cumulated "
@@ -85,26 +91,17 @@ def add_import(commands) -> None:
         "out and reported; intervals that break the smooth decay (echoes, missed bounces) are kept and "
         "reported as warnings, for a robust fit. Writes observe = impacts.",
     )
-    ph.add_argument("source", metavar="SOURCE", help="the export, .csv or .xlsx (only read)")
-    _common(
-        ph,
-        x0_help=_X0_IMPACTS,
-        noise_help="onset-time standard deviation, s (default: none, so a fit estimates it from its residuals)",
-    )
-    ph.set_defaults(func=_run_import)
 
-    v = sources.add_parser(
+    v = _source_kind(
+        sources,
         "video",
+        source_help="the tracking table, CSV (only read)",
+        x0_help="height at t = 0, m (default: the first sample's height)",
+        noise_help="position standard deviation, m (default: none, so a fit estimates it from its residuals)",
         help="a height trace from a video-tracking table (Tracker and similar)",
         description="Read a video-tracking CSV: a header row with units (t (s), y (cm)), possibly after a "
         "preamble line such as Tracker's 'mass A'. Writes observe = trace with t (s, 0 = the first tracked "
         "frame: video time zero is the first frame, not the release) and x (m).",
-    )
-    v.add_argument("source", metavar="SOURCE", help="the tracking table, CSV (only read)")
-    _common(
-        v,
-        x0_help="height at t = 0, m (default: the first sample's height)",
-        noise_help="position standard deviation, m (default: none, so a fit estimates it from its residuals)",
     )
     v.add_argument(
         "--column", metavar="NAME", help="the height column (default: y if present, else the second column)"
@@ -116,7 +113,6 @@ def add_import(commands) -> None:
         help="metres per unit of the height column (default: from the header unit m, cm or mm; required if "
         "the header has none)",
     )
-    v.set_defaults(func=_run_import)
 
 
 def _run_import(args) -> int:

@@ -191,22 +191,37 @@ def impacts_dataset(
     if v0 is None:
         v0 = 0.0
         notes.append("v0 = 0 (released from rest)")
-    ds = Dataset(
-        scene="drop",
+    ds = drop_dataset(
+        notes,
         observe="impacts",
-        mass=DEFAULT_MASS if mass is None else mass,
-        drag=DEFAULT_DRAG if drag is None else drag,
+        source=source,
+        importer=importer,
+        mass=mass,
+        drag=drag,
         x0=x0,
         v0=v0,
         noise=noise,
         t=times,
+    )
+    return ds, notes
+
+
+def drop_dataset(notes: list[str], *, source: str, importer: str, mass, drag, **fields) -> Dataset:
+    """A `scene = drop` data set with the importers' default mass and drag (None: the
+    default, noted in `notes`) and `source` naming the file and the importer; `fields`:
+    the other `Dataset` fields (observe, x0, v0, noise, t, x)."""
+    ds = Dataset(
+        scene="drop",
+        mass=DEFAULT_MASS if mass is None else mass,
+        drag=DEFAULT_DRAG if drag is None else drag,
         source=source_text(source, importer),
+        **fields,
     )
     if mass is None:
         notes.append(f"mass = {DEFAULT_MASS} kg (default: a 40 mm ITTF ball)")
     if drag is None:
         notes.append(f"drag = {DEFAULT_DRAG} s/m (default: a 40 mm ITTF ball)")
-    return ds, notes
+    return ds
 
 
 # -- the interval sequence ----------------------------------------------------------------

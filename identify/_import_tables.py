@@ -19,18 +19,16 @@ import re
 
 import numpy as np
 
-from ._data import Dataset, read_bytes
+from ._data import read_bytes
 from ._import import (
-    DEFAULT_DRAG,
-    DEFAULT_MASS,
     ImportResult,
     Rejected,
     check_options,
+    drop_dataset,
     fit_intervals,
     impacts_dataset,
     interval_warnings,
     plot_intervals,
-    source_text,
 )
 
 _POINT = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
@@ -334,6 +332,14 @@ def _seconds(table: Table, col: Column, notes: list[str]) -> float:
     return scale
 
 
+def _trailing(table: Table) -> list[Rejected]:
+    """The junk rows after the data, as `Rejected` entries."""
+    return [
+        Rejected(math.nan, f"junk after the data, not read: {text[:60]!r}", line)
+        for line, text in table.trailing
+    ]
+
+
 def _find(columns: list[Column], patterns) -> int | None:
     for pattern in patterns:
         for i, c in enumerate(columns):
@@ -373,10 +379,7 @@ def import_phyphox(
     table = read_table(path)
     name = os.fspath(path)
     notes: list[str] = []
-    rejected: list[Rejected] = [
-        Rejected(math.nan, f"junk after the data, not read: {text[:60]!r}", line)
-        for line, text in table.trailing
-    ]
+    rejected: list[Rejected] = _trailing(table)
     warnings: list[str] = []
     cols = table.columns
     time_i = _find(cols, (r"event\s*time", r"time", r"t", r"timestamp", r".*time.*"))
@@ -587,10 +590,7 @@ def import_video(
                 f"{table.at(table.header_line)}: column {hcol.header!r}: unit {hcol.unit!r} is not a length "
                 f"unit this reader knows ({', '.join(_LENGTH_UNITS)}); pass --scale (metres per unit)"
             )
-    rejected = [
-        Rejected(math.nan, f"junk after the data, not read: {text[:60]!r}", line)
-        for line, text in table.trailing
-    ]
+    rejected = _trailing(table)
     t, x, lines = [], [], []
     for line, values in table.rows:
         tv, hv = values[time_i], values[height_i]
@@ -630,22 +630,19 @@ def import_video(
     )
     if noise is None:
         notes.append("noise: none written (a fit estimates sigma from its residuals); --noise sets it")
-    ds = Dataset(
-        scene="drop",
+    ds = drop_dataset(
+        notes,
         observe="trace",
-        mass=DEFAULT_MASS if mass is None else mass,
-        drag=DEFAULT_DRAG if drag is None else drag,
+        source=name,
+        importer="video",
+        mass=mass,
+        drag=drag,
         x0=x0,
         v0=v0,
         noise=noise,
         t=t_a - t0,
         x=x_a,
-        source=source_text(name, "video"),
     )
-    if mass is None:
-        notes.append(f"mass = {DEFAULT_MASS} kg (default: a 40 mm ITTF ball)")
-    if drag is None:
-        notes.append(f"drag = {DEFAULT_DRAG} s/m (default: a 40 mm ITTF ball)")
     return ImportResult(
         dataset=ds,
         importer="video",

@@ -221,8 +221,9 @@ LAWS = {"kelvin-voigt": jaxunilat.KelvinVoigt(), "hunt-crossley": jaxunilat.Hunt
 #: The simulated horizon in units of the contact's time scale (see `_impact`). A contact
 #: that has not ended by then holds the ball: e = 0, t_c = inf.
 _HORIZON = 20.0
-#: Hertz's contact-time constant: t_c = C δ_max/v for n = 3/2 (≈ 2.9432).
-_HERTZ = 2.0 * math.sqrt(math.pi) * math.gamma(1.0 + 1.0 / 2.5) / math.gamma(0.5 + 1.0 / 2.5)
+#: Hertz's contact-time constant: t_c = C δ_max/v for n = 3/2 (≈ 2.9432): the undamped
+#: contact time at κ = 5/4, m = v = 1, where δ_max = 1.
+_HERTZ = jaxunilat.hunt_crossley_contact_time(1.25, 1.0, 1.0)
 #: Entry, deepest point, exit, and the apex after it: the loop stops at a fifth event.
 _MAX_EVENTS = 4
 
