@@ -176,12 +176,7 @@ def contact_time(kappa: ArrayLike, k_r: ArrayLike, mass: ArrayLike) -> Array:
 
     **Arguments:** `kappa` (N/m), `k_r` (N·s/m), `mass` (kg).
     """
-    zeta = damping_ratio(kappa, k_r, mass)
-    under = zeta < 1
-    safe = jnp.where(under, zeta, 0.5)
-    kappa, mass = _real(kappa=kappa, mass=mass)
-    wd = jnp.sqrt(kappa / mass) * jnp.sqrt(1 - safe**2)
-    return jnp.where(under, jnp.pi / wd, jnp.inf)
+    return rk4_step_limit(*_real(kappa=kappa, k_r=k_r, mass=mass))[1]
 
 
 #: `simulate(solver="rk4")` takes at least this many steps per Kelvin–Voigt contact time.

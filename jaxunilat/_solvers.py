@@ -192,7 +192,7 @@ def _plain(value):
         return value
     if isinstance(value, (bool, np.bool_)):
         return ("bool", bool(value))
-    if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_)):
+    if isinstance(value, (int, float, np.integer, np.floating)):
         return (type(value).__name__, float(value))
     if isinstance(value, np.ndarray) and value.shape == () and value.dtype.kind in "iuf":
         return ("0d", value.dtype.str, float(value))

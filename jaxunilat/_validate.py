@@ -108,6 +108,16 @@ def _range_text(lo, hi, lo_open, hi_open) -> str:
     return f"{left}{lo_txt}, {hi_txt}{right}"
 
 
+def _within(v, lo, hi, lo_open, hi_open):
+    """Whether `v` (a float, or an array: elementwise) lies within the bounds (NaN: no)."""
+    ok = True
+    if lo is not None:
+        ok = ok & ((v > lo) if lo_open else (v >= lo))
+    if hi is not None:
+        ok = ok & ((v < hi) if hi_open else (v <= hi))
+    return ok
+
+
 def runtime_check(
     name: str,
     value,
@@ -128,11 +138,7 @@ def runtime_check(
     import jax.numpy as jnp
 
     v = jnp.asarray(value)
-    ok = jnp.isfinite(v)
-    if lo is not None:
-        ok = ok & ((v > lo) if lo_open else (v >= lo))
-    if hi is not None:
-        ok = ok & ((v < hi) if hi_open else (v <= hi))
+    ok = jnp.isfinite(v) & _within(v, lo, hi, lo_open, hi_open)
     suffix = f" {unit}" if unit else ""
     message = (
         f"jaxunilat.simulate: {name} is out of range (a traced value); valid range is "
@@ -168,12 +174,7 @@ def check_range(
     rng = _range_text(lo, hi, lo_open, hi_open)
     suffix = f" {unit}" if unit else ""
     for v in _values(name, value):
-        bad = False
-        if lo is not None and (v < lo or (lo_open and v == lo)):
-            bad = True
-        if hi is not None and (v > hi or (hi_open and v == hi)):
-            bad = True
-        if bad:
+        if not _within(v, lo, hi, lo_open, hi_open):
             raise ValueError(f"{name} = {v:g}{suffix} is out of range; valid range is {rng}{suffix}")
 
 
