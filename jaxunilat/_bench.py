@@ -192,16 +192,20 @@ def _timed(fn: Callable, size: Size) -> Timing:
     return _timed_together([fn], size)[0]
 
 
-def _timed_together(fns: list[Callable], size: Size) -> list[Timing]:
+def _timed_together(fns: list[Callable], size: Size, warm_ups: int = 1) -> list[Timing]:
     """`_timed` for calls that are compared with each other (a gradient against its
-    forward): one warm-up each, then the runs alternate between them, so that a slow
-    spell of the machine falls on all of them alike."""
-    outs, firsts = [], []
-    for fn in fns:
-        start = time.perf_counter()
-        outs.append(fn())
-        firsts.append(time.perf_counter() - start)
-    slow = max(firsts) >= size.slow_s
+    forward): `warm_ups` rounds of warm-up calls (the first with compilation; the last
+    decides whether the calls are slow), then the runs alternate between them, so that a
+    slow spell of the machine falls on all of them alike."""
+    outs, rounds = [None] * len(fns), []
+    for _ in range(warm_ups):
+        rounds.append([])
+        for i, fn in enumerate(fns):
+            start = time.perf_counter()
+            outs[i] = fn()
+            rounds[-1].append(time.perf_counter() - start)
+    firsts, lasts = rounds[0], rounds[-1]
+    slow = max(lasts) >= size.slow_s
     walls = [[] for _ in fns]
     spent = 0.0
     while True:

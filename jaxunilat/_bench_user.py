@@ -85,16 +85,11 @@ def _run(kappa, k_r=None, autodiff="reverse"):
 
 
 def _timed(fns, size, timed_together):
-    """(compile times, timings) of calls compared with each other: a first call of each
-    (with its compilation), then `timed_together`'s warm-up and alternating runs, whose
-    number then follows the warm call's time (not the compile's)."""
-    firsts = []
-    for fn in fns:
-        start = time.perf_counter()
-        fn()
-        firsts.append(time.perf_counter() - start)
-    timings = timed_together(fns, size)
-    return [max(first - t.median, 0.0) for first, t in zip(firsts, timings, strict=True)], timings
+    """(compile times, timings) of calls compared with each other: `timed_together` with
+    two warm-up rounds, the first with compilation, so that the number of runs follows the
+    warm call's time (not the compile's)."""
+    timings = timed_together(fns, size, warm_ups=2)
+    return [max(t.first - t.median, 0.0) for t in timings], timings
 
 
 def user_row(kappa):

@@ -66,9 +66,7 @@ from jaxtyping import Array
 from ._coupling import Coupling
 from ._heaviside import Exact, Logistic
 from ._model import AbstractModel
-from ._simulate import _TRACES
-
-_STATE = ("psi_xi", "dpsi_xi", "psi_eta", "dpsi_eta")
+from ._simulate import _TRACES, simulate
 
 
 def _log_norm(x: Array) -> Array:
@@ -128,8 +126,6 @@ def _initial_tangent(scale):
 @eqx.filter_jit
 def _exact_ftle(model, t0, t1, rtol, atol, max_steps, max_events):
     """λ of the exact model by `jax.jvp` through the event mode (one compilation per structure)."""
-    from ._simulate import simulate
-
     _TRACES["ftle"] += 1
     exact = eqx.tree_at(lambda m: m.heaviside, model, Exact())
     scale = TangentCoupling(exact)._scale()
@@ -145,12 +141,12 @@ def _exact_ftle(model, t0, t1, rtol, atol, max_steps, max_events):
             rtol=rtol,
             atol=atol,
             ts=ts,
-            outputs=_STATE,
+            outputs=Coupling.state_names,
             max_steps=max_steps,
             max_events=max_events,
             throw=False,
         )
-        return jnp.stack([sol.ys[n] for n in _STATE], axis=1), sol.status
+        return jnp.stack([sol.ys[n] for n in Coupling.state_names], axis=1), sol.status
 
     y0 = exact.paper_initial_state()
     _, dys, status = jax.jvp(states, (y0,), (_initial_tangent(scale),), has_aux=True)
@@ -160,8 +156,6 @@ def _exact_ftle(model, t0, t1, rtol, atol, max_steps, max_events):
 
 def _smoothed_ftle(model, t0, t1, eps_fraction, rtol, atol, max_steps):
     """λ of the logistic-smoothed model from its tangent dynamics (Tsit5)."""
-    from ._simulate import simulate
-
     smooth = eqx.tree_at(lambda m: m.heaviside, model, Logistic(eps_fraction * model.delta_xi))
     tangent = TangentCoupling(smooth)
     z0 = jnp.concatenate([smooth.paper_initial_state(), _initial_tangent(tangent._scale())])
