@@ -15,6 +15,7 @@ from ._data import (  # noqa: E402
     write_dataset as write_dataset,
 )
 from ._export import (  # noqa: E402
+    DEFAULT_IMPEDANCE as DEFAULT_IMPEDANCE,
     MujocoContact as MujocoContact,
     mujoco_contact as mujoco_contact,
 )
@@ -29,12 +30,23 @@ from ._import_audio import (  # noqa: E402
     WavAudio as WavAudio,
     detect_onsets as detect_onsets,
     import_wav as import_wav,
+    plot_detection as plot_detection,
     read_wav as read_wav,
 )
-from ._import_tables import import_phyphox as import_phyphox, import_video as import_video  # noqa: E402
+from ._import_tables import (  # noqa: E402
+    import_phyphox as import_phyphox,
+    import_video as import_video,
+    plot_table_import as plot_table_import,
+)
 from ._plot import plot_fit as plot_fit  # noqa: E402
 from ._problem import NUISANCE as NUISANCE, PARAMETERS as PARAMETERS  # noqa: E402
 from ._qualify import (  # noqa: E402
+    DEFAULT_DRAG as DEFAULT_DRAG,
+    DEFAULT_SAMPLES as DEFAULT_SAMPLES,
+    ITTF_DROP as ITTF_DROP,
+    ITTF_MASS as ITTF_MASS,
+    ITTF_MAX as ITTF_MAX,
+    ITTF_MIN as ITTF_MIN,
     QualifyResult as QualifyResult,
     qualify as qualify,
     qualify_fit as qualify_fit,

@@ -35,7 +35,7 @@ def plot_restitution(data=None, laws=None, *, ax=None, title: str | None = None)
     - `ax`: a matplotlib `Axes` to draw on; default: a new figure.
     - `title`: the axes' title.
 
-    **Returns:** the `matplotlib.figure.Figure` (save it with `jaxunilat.save_figure`).
+    **Returns:** the `matplotlib.figure.Figure` (save it with `jaxunilat.plot.save_figure`).
     """
     sets = _data_sets(data)
     curves = dict(laws or {})

@@ -2,77 +2,96 @@
 
 Implements Kukla, Posiadała, Skalmierski & Tylikowski (1990), "Dynamics problem of
 mechanical systems with unilateral constraints" [K90]: a table-tennis ball between two
-rackets with air drag, with penalty contact written with Heaviside functions.
+rackets with air drag, and a rolling-mill coupling with clearance, with penalty contact
+written with Heaviside functions.
 
-Importing the package enables float64 in JAX. On a CPU, call `use_loop_kernels()` before
-the first computation: the event mode's step loop then compiles into one kernel (about
-10× faster per step); the `jaxunilat` command line does this itself.
+The top level holds the core: models, contact laws, Heaviside options, `simulate`, its
+`Solution` and `Status`, observations, `sweep` and `use_loop_kernels`. Studies, figures,
+the paper's reproduction and debugging helpers are namespaces: `jaxunilat.analysis`,
+`jaxunilat.plot`, `jaxunilat.paper`, `jaxunilat.debug`.
+
+Importing the package enables float64 in JAX; it never imports matplotlib or scipy. On a
+CPU, call `use_loop_kernels()` before the first computation: the event mode's step loop
+then compiles into one kernel (about 10× faster per step); the `jaxunilat` command line
+does this itself.
 """
 
 import jax
 
 jax.config.update("jax_enable_x64", True)
 
-from ._ball import (  # noqa: E402
+from . import analysis as analysis, debug as debug, paper as paper, plot as plot  # noqa: E402
+from ._models import (  # noqa: E402
     PAPER_DRAG as PAPER_DRAG,
     PAPER_GAP as PAPER_GAP,
     PAPER_GRAVITY as PAPER_GRAVITY,
     PAPER_MASS as PAPER_MASS,
     TABLE1 as TABLE1,
-    Ball as Ball,
-    ball_state as ball_state,
-)
-from ._contact import (  # noqa: E402
+    TABLE2 as TABLE2,
     AbstractContactLaw as AbstractContactLaw,
+    AbstractHeaviside as AbstractHeaviside,
+    AbstractModel as AbstractModel,
+    Ball as Ball,
     ClampedKelvinVoigt as ClampedKelvinVoigt,
+    Coupling as Coupling,
+    Exact as Exact,
+    ExactHeavisideGradientWarning as ExactHeavisideGradientWarning,
     HuntCrossley as HuntCrossley,
     KelvinVoigt as KelvinVoigt,
+    Logistic as Logistic,
+    Softplus as Softplus,
+    ball_state as ball_state,
     clearance_force as clearance_force,
     contact_time as contact_time,
     damping_ratio as damping_ratio,
+    heaviside as heaviside,
     hunt_crossley_contact_time as hunt_crossley_contact_time,
     parameters_from_restitution as parameters_from_restitution,
     restitution as restitution,
     symmetric_clearance_force as symmetric_clearance_force,
 )
-from ._coupling import TABLE2 as TABLE2, Coupling as Coupling  # noqa: E402
-from ._coupling_impacts import IMPACT_COLUMNS as IMPACT_COLUMNS, impact_table as impact_table  # noqa: E402
-from ._event import EventRecord as EventRecord  # noqa: E402
-from ._gradient_growth import GradientGrowth as GradientGrowth, gradient_growth as gradient_growth  # noqa: E402
-from ._heaviside import (  # noqa: E402
-    AbstractHeaviside as AbstractHeaviside,
-    Exact as Exact,
-    ExactHeavisideGradientWarning as ExactHeavisideGradientWarning,
-    Logistic as Logistic,
-    Softplus as Softplus,
-    heaviside as heaviside,
-)
-from ._io import read_csv as read_csv, write_csv as write_csv  # noqa: E402
-from ._loop_kernels import loop_kernel_bytes as loop_kernel_bytes, use_loop_kernels as use_loop_kernels  # noqa: E402
-from ._lyapunov import TangentCoupling as TangentCoupling, ftle as ftle  # noqa: E402
-from ._model import AbstractModel as AbstractModel  # noqa: E402
-from ._observe import (  # noqa: E402
+from ._solver import (  # noqa: E402
     CONTACT_COLUMNS as CONTACT_COLUMNS,
-    apexes as apexes,
-    contact_table as contact_table,
-    impact_times as impact_times,
-)
-from ._plot import plot_ball as plot_ball, save_figure as save_figure  # noqa: E402
-from ._plot_coupling import plot_coupling as plot_coupling, plot_impact_forces as plot_impact_forces  # noqa: E402
-from ._reproduce import reproduce as reproduce  # noqa: E402
-from ._sensitivity import (  # noqa: E402
-    SensitivityResult as SensitivityResult,
-    ball_sensitivity as ball_sensitivity,
-    coupling_sensitivity as coupling_sensitivity,
-)
-from ._simulate import (  # noqa: E402
+    IMPACT_COLUMNS as IMPACT_COLUMNS,
+    RK4 as RK4,
+    EventRecord as EventRecord,
     Solution as Solution,
     Status as Status,
+    apexes as apexes,
+    contact_table as contact_table,
+    impact_table as impact_table,
+    impact_times as impact_times,
     simulate as simulate,
-    trace_counts as trace_counts,
+    sweep as sweep,
+    use_loop_kernels as use_loop_kernels,
 )
-from ._solvers import RK4 as RK4  # noqa: E402
-from ._sweep import sweep as sweep  # noqa: E402
+from .internal._io import read_csv as read_csv, write_csv as write_csv  # noqa: E402
+
+#: Names that lived at the top level before the namespaces: each still works, as an
+#: alias of the namespace's name (`jaxunilat.plot_ball` is `jaxunilat.plot.plot_ball`).
+_ALIASES = {
+    "plot_ball": plot,
+    "save_figure": plot,
+    "plot_coupling": plot,
+    "plot_impact_forces": plot,
+    "reproduce": paper,
+    "SensitivityResult": analysis,
+    "ball_sensitivity": analysis,
+    "coupling_sensitivity": analysis,
+    "TangentCoupling": analysis,
+    "ftle": analysis,
+    "GradientGrowth": analysis,
+    "gradient_growth": analysis,
+    "trace_counts": debug,
+    "loop_kernel_bytes": debug,
+}
+
+
+def __getattr__(name: str):
+    namespace = _ALIASES.get(name)
+    if namespace is None:
+        raise AttributeError(f"module 'jaxunilat' has no attribute {name!r}")
+    return getattr(namespace, name)
 
 
 def _version() -> str:

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import jaxunilat as ju
-from jaxunilat._cli import main
+from jaxunilat._cli._main import main
 
 Y0 = np.array([-0.4, -1.0 / 0.122])
 

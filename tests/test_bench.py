@@ -1,6 +1,6 @@
 """`jaxunilat bench`: its reference, its peers, its bookkeeping, and a tiny end-to-end run.
 
-The benchmark's reference (`jaxunilat._bench_peers`) is package code; here it is checked
+The benchmark's reference (`jaxunilat._bench._peers`) is package code; here it is checked
 against this suite's independent references (`reference.py`: scipy with events and the
 drag-free closed form). No test asserts on wall-clock time.
 """
@@ -19,8 +19,14 @@ import pytest
 from helpers import PAPER_Y0
 from reference import BallParams, closed_form_reference, parabola
 
-from jaxunilat import _bench, _bench_goals, _bench_peers as peers, _bench_scale, _bench_user
-from jaxunilat._cli import main
+from jaxunilat._bench import (
+    _goals as _bench_goals,
+    _main as _bench,
+    _peers as peers,
+    _scale as _bench_scale,
+    _user as _bench_user,
+)
+from jaxunilat._cli._main import main
 
 TS = np.linspace(0.0, 2.0, 2001)
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from reference import BallParams, scipy_reference
 
-from jaxunilat._cli import main
+from jaxunilat._cli._main import main
 
 
 def _run(args, capsys):
@@ -207,8 +207,8 @@ def test_events_output_path_checks(tmp_path, capsys):
 _FOREVER = """
 import sys
 import jax, jax.numpy as jnp
-import jaxunilat._simulate as engine
-from jaxunilat._cli import main
+import jaxunilat._solver._simulate as engine
+from jaxunilat._cli._main import main
 
 def forever(*args, **kwargs):  # a compiled solve that never returns
     print("solving", flush=True)
@@ -260,7 +260,7 @@ class _Recorder:
 
 @pytest.mark.parametrize("model", ["ball", "coupling"])
 def test_solver_knob_flags_reach_simulate(model, monkeypatch, capsys):
-    import jaxunilat._simulate as engine
+    import jaxunilat._solver._simulate as engine
     from jaxunilat import Status
 
     record = _Recorder(Status.MAX_STEPS)
@@ -299,7 +299,7 @@ def test_solver_knob_flags_reach_simulate(model, monkeypatch, capsys):
 def test_ball_failure_hint_lists_the_knobs_of_the_solver_used(
     solver, status, present, absent, monkeypatch, capsys
 ):
-    import jaxunilat._simulate as engine
+    import jaxunilat._solver._simulate as engine
     from jaxunilat import Status
 
     monkeypatch.setattr(engine, "simulate", _Recorder(Status[status]))
@@ -328,8 +328,8 @@ def test_event_knobs_need_the_event_solver(argv, flag, capsys):
 
 
 def test_api_failure_hints_follow_the_solver():
-    from jaxunilat._simulate import _messages
-    from jaxunilat._solvers import make_settings
+    from jaxunilat._solver._settings import make_settings
+    from jaxunilat._solver._simulate import _messages
 
     event = _messages(make_settings("event", 1.0, flight="integrated", dtmax=0.01))[0]
     for part in ("max_steps = 16384", "piece_solver='dopri8'", "flight='closed'", "a larger dtmax"):
@@ -346,8 +346,8 @@ def test_a_solver_failure_inside_a_transformation_prints_its_own_message(capsys,
     """A run that fails inside jit/jacrev reaches the command line wrapped (equinox's class
     name first, JAX's traced stack with file paths before it): the one line printed is
     the solver's message, never a traceback's file path."""
-    import jaxunilat._sensitivity as sensitivity
-    from jaxunilat._cli import main
+    import jaxunilat.analysis._sensitivity as sensitivity
+    from jaxunilat._cli._main import main
 
     wrapped = (
         "Above is the stack outside of JIT. Below is the stack inside of JIT:\n"

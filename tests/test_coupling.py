@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 import jaxunilat as ju
-from jaxunilat._coupling import TABLE2, Coupling
-from jaxunilat._coupling_impacts import impact_table
+from jaxunilat._models._coupling import TABLE2, Coupling
+from jaxunilat._solver._coupling_impacts import impact_table
 
 OUTPUTS = ("psi_xi", "dpsi_xi", "psi_eta", "dpsi_eta", "T_xi", "T_eta")
 SAMPLES = 10001

@@ -6,9 +6,9 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxunilat as ju
-from jaxunilat._coupling import Coupling
-from jaxunilat._heaviside import Logistic
-from jaxunilat._lyapunov import TangentCoupling, ftle
+from jaxunilat._models._coupling import Coupling
+from jaxunilat._models._heaviside import Logistic
+from jaxunilat.analysis._lyapunov import TangentCoupling, ftle
 
 
 def test_tangent_matches_finite_difference_of_the_vector_field():

@@ -6,7 +6,7 @@ import os
 import numpy as np
 import pytest
 
-from jaxunilat._cli import main
+from jaxunilat._cli._main import main
 
 
 def test_simulate_coupling_csv_and_plot(tmp_path, capsys):

@@ -1,4 +1,4 @@
-"""The event mode's dense output (`jaxunilat._dense`): polynomial weights in θ.
+"""The event mode's dense output (`jaxunilat._solver._dense`): polynomial weights in θ.
 
 References: diffrax's own interpolants (`Tsit5` and `Dopri8`, evaluated as diffrax
 does), the step's end y1 = y0 + Σ bⱼkⱼ from the Butcher tableau, and the local error
@@ -10,8 +10,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxunilat import _dense
-from jaxunilat._event import _erk_step
+from jaxunilat._solver import _dense
+from jaxunilat._solver._event import _erk_step
 
 SOLVERS = [dfx.Tsit5, dfx.Dopri8]
 

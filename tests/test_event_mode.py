@@ -371,7 +371,7 @@ def test_fixed_step_convergence_order_is_at_least_three(ref_ex2):
 
 
 def test_root_finder_reaches_machine_precision_and_differentiates():
-    from jaxunilat._event import _locate
+    from jaxunilat._solver._event import _locate
 
     # Far from the origin float64 spacing is ~1e-13: no tolerance is requested, the
     # bracket just stops shrinking.
@@ -437,7 +437,7 @@ def test_apex_height_gradient_vs_reference_finite_differences():
 def test_save_time_count_matches_numpy_searchsorted(n):
     """A recorded step covers the save times up to its end: their count must agree with
     numpy's searchsorted(side="right"), ties and times beyond either end included."""
-    from jaxunilat._event import _count_at_or_before
+    from jaxunilat._solver._event import _count_at_or_before
 
     rng = np.random.default_rng(n)
     ts = np.sort(rng.uniform(0.0, 2.0, n))
@@ -451,7 +451,7 @@ def test_save_time_rows_sequential_and_vectorized_agree():
     CPU, vectorized elsewhere) give the same row, contact flag and step for every save
     time, on random records; the row is the last recorded one whose first save time is
     at or before it (its definition)."""
-    from jaxunilat import _event
+    from jaxunilat._solver import _event
 
     rng = np.random.default_rng(3)
     n_sw, n = 2, 2

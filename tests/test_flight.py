@@ -1,4 +1,4 @@
-"""Closed-form free flight (`jaxunilat._flight`, the event mode's `flight="closed"`).
+"""Closed-form free flight (`jaxunilat._models._flight`, the event mode's `flight="closed"`).
 
 References: scipy `solve_ivp(DOP853)` at tight tolerance on ẍ = −g − k²g·v|v| (with
 event location for the times), the parabola for k = 0, and the event mode's own
@@ -16,7 +16,7 @@ from reference import BallParams, scipy_reference
 from scipy.integrate import solve_ivp
 
 import jaxunilat
-from jaxunilat import _flight
+from jaxunilat._models import _flight
 
 G, K = 9.81, 0.122
 
@@ -279,7 +279,7 @@ def test_without_gravity_a_rising_ball_reaches_the_upper_wall():
 def test_rising_half_angle_sine_is_within_two_ulp_of_libm():
     """The series for sin(φ/2) in a rising piece (φ ≤ atan(b) < π/2) against Python's
     math.sin: 1 ulp on [0, π/4] (where it is used), 2 ulp on [0, π/2]."""
-    from jaxunilat._flight import _sin_rising
+    from jaxunilat._models._flight import _sin_rising
 
     xs = np.concatenate([np.linspace(0.0, np.pi / 2, 4001), np.geomspace(1e-12, 1e-2, 200)])
     got = np.asarray(_sin_rising(jnp.asarray(xs)))

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import jaxunilat as ju
-from jaxunilat._gradient_growth import state_at, window_loss
+from jaxunilat.analysis._gradient_growth import state_at, window_loss
 
 T_START = 6.0  # s, past the spin-up: full speed
 SHORT, LONG = 0.05, 2.0  # s

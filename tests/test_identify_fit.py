@@ -16,7 +16,7 @@ from reference import BallParams, kelvin_voigt_contact_time, kelvin_voigt_restit
 
 import identify
 import jaxunilat as ju
-from jaxunilat._cli import main
+from jaxunilat._cli._main import main
 
 TRUE = dict(kappa=1.6e4, k_r=0.15)
 MASS, DRAG, X0 = 2.7e-3, 0.12, 0.30

@@ -18,7 +18,7 @@ from bounce_reference import hertz_contact_time, scipy_bounces, scipy_hunt_cross
 from reference import BallParams, kelvin_voigt_restitution, scipy_reference
 
 import identify
-from jaxunilat._cli import main
+from jaxunilat._cli._main import main
 
 KAPPA, K_R, MASS, DRAG = 1.6e4, 0.15, 2.7e-3, 0.12
 E_TRUE = kelvin_voigt_restitution(KAPPA, K_R, MASS)

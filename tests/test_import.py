@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from identify import detect_onsets, import_phyphox, import_video, import_wav, load_dataset, read_wav
-from jaxunilat._cli import main
+from jaxunilat._cli._main import main
 
 DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data")
 TOL = 0.1e-3  # onset accuracy asked of the detector, s

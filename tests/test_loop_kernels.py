@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 
 import jaxunilat as ju
-from jaxunilat import _loop_kernels
-from jaxunilat._simulate import _solve
-from jaxunilat._solvers import make_settings
+from jaxunilat._solver import _loop_kernels
+from jaxunilat._solver._settings import make_settings
+from jaxunilat._solver._simulate import _solve
 
 OPTION = "xla_cpu_small_while_loop_byte_threshold"
 

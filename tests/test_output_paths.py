@@ -14,7 +14,7 @@ import shutil
 
 import pytest
 
-from jaxunilat._cli import build_parser, main
+from jaxunilat._cli._main import build_parser, main
 
 DATA_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data")
 
@@ -186,8 +186,8 @@ def test_output_flag_refuses_a_collision(command, flag, target, spelling, tmp_pa
 @pytest.mark.parametrize("name", ["bench", "reproduce"])
 def test_output_dir_refuses_a_directory_where_it_writes_a_file(name, tmp_path, capsys):
     """A directory in --out DIR with the name of a file the command writes: refused up front."""
-    import jaxunilat._cli_bench as bench
-    import jaxunilat._reproduce as reproduce
+    import jaxunilat._cli._bench as bench
+    import jaxunilat.paper._reproduce as reproduce
 
     out = tmp_path / "out"
     blocker = bench.OUTPUT_FILES[0] if name == "bench" else reproduce.SUMMARY

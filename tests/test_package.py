@@ -45,3 +45,81 @@ def test_identify_uses_only_the_public_api_and_jaxunilat_internal():
                 if parts[0] == "jaxunilat" and any(p.startswith("_") for p in parts[1:]):
                     private.append(f"{path.name}:{node.lineno}: {name}")
     assert private == []
+
+
+def _imports(path):
+    """(line, module) of every import in a source file (parsed: strings and comments do
+    not count); relative imports resolved against the file's package."""
+    import ast
+
+    root = path.parents[len(path.relative_to(_ROOT).parts) - 1]
+    package = ".".join(path.relative_to(root.parent).with_suffix("").parts)
+    if path.name == "__init__.py":
+        package += ".__init__"
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parent = package.split(".")[: -node.level]
+                base = ".".join(parent + ([base] if base else []))
+            found += [(node.lineno, base)] + [(node.lineno, f"{base}.{a.name}") for a in node.names]
+        elif isinstance(node, ast.Import):
+            found += [(node.lineno, a.name) for a in node.names]
+    return found
+
+
+_ROOT = __import__("pathlib").Path(__file__).resolve().parent.parent
+
+
+def test_only_the_command_line_and_the_bench_import_identify():
+    """jaxunilat's core, studies and figures never import `identify` (the packages
+    depend one way: identify on jaxunilat)."""
+    offenders = []
+    for path in sorted((_ROOT / "jaxunilat").rglob("*.py")):
+        part = path.relative_to(_ROOT / "jaxunilat").parts[0]
+        if part in ("_cli", "_bench"):
+            continue
+        offenders += [
+            f"{path.relative_to(_ROOT)}:{line}: {name}"
+            for line, name in _imports(path)
+            if name.split(".")[0] == "identify"
+        ]
+    assert offenders == []
+
+
+def test_identify_reads_only_public_names_of_jaxunilat():
+    """`ju.NAME` in identify names the curated public API (not a private attribute, and
+    not one of the top-level aliases kept for the namespaces)."""
+    import ast
+
+    public = {name for name in dir(jaxunilat) if not name.startswith("_")}
+    offenders = []
+    for path in sorted((_ROOT / "identify").glob("*.py")):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        aliases = {
+            a.asname or a.name
+            for node in ast.walk(tree)
+            if isinstance(node, ast.Import)
+            for a in node.names
+            if a.name == "jaxunilat"
+        }
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name):
+                if node.value.id in aliases and node.attr not in public:
+                    offenders.append(f"{path.name}:{node.lineno}: {node.value.id}.{node.attr}")
+    assert offenders == []
+
+
+def test_namespaces_and_the_aliases_of_their_old_top_level_names():
+    assert jaxunilat.analysis.ftle is jaxunilat.ftle
+    assert jaxunilat.plot.plot_ball is jaxunilat.plot_ball
+    assert jaxunilat.paper.reproduce is jaxunilat.reproduce
+    assert jaxunilat.debug.trace_counts is jaxunilat.trace_counts
+    assert isinstance(jaxunilat.debug.trace_counts(), dict)
+    try:
+        jaxunilat.no_such_name  # noqa: B018
+    except AttributeError as err:
+        assert "no_such_name" in str(err)
+    else:
+        raise AssertionError("an unknown attribute must raise AttributeError")

@@ -16,7 +16,7 @@ from scipy.optimize import brentq
 
 import jaxunilat
 from identify._qualify import qualify, qualify_fit, rebound_height, verdict
-from jaxunilat._cli import main
+from jaxunilat._cli._main import main
 
 M = 2.7e-3
 

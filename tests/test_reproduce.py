@@ -4,8 +4,8 @@ import os
 
 import pytest
 
-from jaxunilat._cli import main
-from jaxunilat._reproduce import FIGURES
+from jaxunilat._cli._main import main
+from jaxunilat.paper._reproduce import FIGURES
 
 
 @pytest.mark.slow

@@ -24,7 +24,7 @@ from helpers import PAPER_Y0
 from reference import BallParams, closed_form_reference, scipy_reference
 
 import jaxunilat
-from jaxunilat._rest import damped_oscillator
+from jaxunilat._models._rest import damped_oscillator
 
 SAMPLES = 2001
 OUTPUTS = ("x", "v", "force", "contact")

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import jaxunilat as ju
-from jaxunilat._cli import main
-from jaxunilat._sensitivity import ball_sensitivity, coupling_sensitivity, format_table
+from jaxunilat._cli._main import main
+from jaxunilat.analysis._sensitivity import ball_sensitivity, coupling_sensitivity, format_table
 
 
 def _check(result, rtol=1e-4):
@@ -69,7 +69,7 @@ def test_cli_sensitivity(capsys):
 def test_an_output_missing_within_the_horizon_is_not_called_chaotic():
     """Example 2's first apex comes at 1.61 s: with t1 = 1 s the apexes do not exist, the
     gradient norm is small, and the table says the events are missing (not chaos)."""
-    from jaxunilat._sensitivity import format_table
+    from jaxunilat.analysis._sensitivity import format_table
 
     result = ju.ball_sensitivity(2, t1=1.0)
     text = format_table(result)

@@ -271,7 +271,7 @@ def test_nonzero_t0_is_a_time_shift(ref_ex2):
 
 
 def test_settings_cache_reuses_validated_settings_and_still_validates():
-    from jaxunilat._solvers import make_settings
+    from jaxunilat._solver._settings import make_settings
 
     a = make_settings("event", 2.0, rtol=1e-9, atol=1e-9, piece_solver="dopri8")
     b = make_settings("event", 2.0, rtol=1e-9, atol=1e-9, piece_solver="dopri8")
@@ -306,7 +306,7 @@ def test_caches_filled_inside_a_transformation_keep_no_tracer():
 def test_a_time_stepping_solver_out_of_steps_points_to_the_event_mode():
     """A stiff or resting contact costs a time-stepping solver about ω·t/3 steps; its
     out-of-steps error says the event mode is the cheaper path (knobs of the solver used)."""
-    from jaxunilat._solvers import failure_hints
+    from jaxunilat._solver._settings import failure_hints
 
     for method in ("tsit5",):
         assert "solver='event'" in failure_hints(method)["max_steps"]

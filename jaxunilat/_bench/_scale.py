@@ -1,0 +1,182 @@
+"""The benchmark's throughput scene and its 1-device against N-device measurement.
+
+Two ways to sweep: vmapped chunks of rows (`batch_size` `CHUNK`), and rows one by one
+(`batch_size=1`), which on a CPU whose loops compile into single kernels
+(`use_loop_kernels`) runs each row at its own pace instead of in lockstep.
+`jaxunilat bench` gives its process one CPU device per core (`host_devices`) so that
+`sweep` shards the rows over every core. `python -m jaxunilat._bench._scale N REPEATS
+[--one-by-one]` prints one JSON object with the sharded sweep's throughput on the first
+device alone and on all visible devices, for a process that could not get them itself.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+import sys
+import time
+
+import numpy as np
+
+#: Table 1 example 2 over [0, 2] s, x saved at 2001 points [K90 §5.1].
+T1 = 2.0
+SAMPLES = 2001
+Y0 = (-0.4, -1.0 / 0.122)
+#: The throughput scene's event mode: Dopri8 pieces at this tolerance (error ≤ 1e-8 m on
+#: example 2, about 125 steps) and buffers.
+TOL = 1e-10
+PIECE = "dopri8"
+MAX_STEPS = 512
+MAX_EVENTS = 256
+#: Rows vmapped together per device (a vmapped while loop holds every row's step buffers).
+CHUNK = 1000
+
+
+def pairs(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """n (κ [N/m], k_r [N·s/m]) pairs, log-uniform over Table 1's ranges [5e3, 2e4] × [0.1, 0.4]."""
+    rng = np.random.default_rng(seed)
+    kappa = 10 ** rng.uniform(np.log10(5e3), np.log10(2e4), n)
+    k_r = 10 ** rng.uniform(np.log10(0.1), np.log10(0.4), n)
+    return kappa, k_r
+
+
+def trajectory(kappa, k_r):
+    """One row of the sweep: (x at the save times [m], status, steps) in the event mode."""
+    from .._models._ball import Ball
+    from .._solver._simulate import simulate
+
+    sol = simulate(
+        Ball.table1(2, kappa=kappa, k_r=k_r),
+        np.asarray(Y0),
+        T1,
+        solver="event",
+        piece_solver=PIECE,
+        rtol=TOL,
+        atol=TOL,
+        samples=SAMPLES,
+        outputs=("x",),
+        max_steps=MAX_STEPS,
+        max_events=MAX_EVENTS,
+        throw=False,
+    )
+    return sol.ys["x"], sol.status, sol.num_steps
+
+
+#: The option `host_devices` added to `XLA_FLAGS`, if any (the bench's child commands
+#: run without it, as users do).
+ADDED_XLA_FLAG: str | None = None
+
+
+def host_devices() -> int | None:
+    """Give this process one CPU device per core, if JAX has not started yet (the
+    benchmark command calls it first): `sweep` then shards rows over every core.
+
+    **Returns:** the device count asked for, or None if it was too late or already set.
+    """
+    import os
+
+    from .._solver._loop_kernels import add_xla_flags
+
+    flags = os.environ.get("XLA_FLAGS", "")
+    count = os.cpu_count() or 1
+    if "xla_force_host_platform_device_count" in flags:
+        return None
+    option = f"--xla_force_host_platform_device_count={count}"
+    if not add_xla_flags(f"{flags} {option}".strip()):
+        return None
+    global ADDED_XLA_FLAG
+    ADDED_XLA_FLAG = option
+    return count
+
+
+def one_by_one_fastest() -> bool:
+    """Whether sweeping rows one by one beats vmapped chunks here: on a CPU whose loops
+    compile into single kernels (`use_loop_kernels`). On a GPU, vmap."""
+    import jax
+
+    from .._solver._loop_kernels import loop_kernel_bytes
+
+    return jax.default_backend() == "cpu" and loop_kernel_bytes() is not None
+
+
+def strategy(one_by_one: bool) -> str:
+    """The sweep strategy's name in the benchmark's rows."""
+    return "rows one by one (batch_size=1)" if one_by_one else f"vmapped (chunks of {CHUNK})"
+
+
+def sweep_kwargs(n: int, devices=None, one_by_one: bool = False) -> dict:
+    """`sweep`'s options for a batch of n rows: one by one, or vmapped in chunks of
+    `CHUNK` rows beyond that size."""
+    if one_by_one:
+        return dict(devices=devices, batch_size=1)
+    return dict(devices=devices, batch_size=CHUNK if n > CHUNK else None)
+
+
+def run_sweep(n: int, repeats: int, devices=None, one_by_one: bool = False) -> dict:
+    """Time `sweep(trajectory, ...)` over n pairs: compile, median wall, memory, steps."""
+    import jax
+
+    from .._solver._sweep import sweep, sweep_compiled
+
+    kappa, k_r = pairs(n)
+    kw = sweep_kwargs(n, devices, one_by_one)
+    start = time.perf_counter()
+    compiled = sweep_compiled(trajectory, kappa, k_r, **kw)
+    compile_s = time.perf_counter() - start
+    out = jax.block_until_ready(sweep(trajectory, kappa, k_r, **kw))
+    walls = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        out = jax.block_until_ready(sweep(trajectory, kappa, k_r, **kw))
+        walls.append(time.perf_counter() - start)
+    wall = statistics.median(walls)
+    n_dev = len(jax.devices() if devices is None else devices)
+    mem = compiled.memory_analysis()
+    per_device = None
+    if mem is not None:
+        per_device = mem.argument_size_in_bytes + mem.output_size_in_bytes + mem.temp_size_in_bytes
+        per_device -= mem.alias_size_in_bytes
+    x, status, steps = (np.asarray(a) for a in out)
+    return {
+        "n": int(n),
+        "strategy": strategy(one_by_one),
+        "devices": n_dev,
+        "wall_s": wall,
+        "runs": len(walls),
+        "compile_s": compile_s,
+        "traj_per_s": n / wall,
+        "peak_mem_mb": None if per_device is None else per_device * n_dev / 2**20,
+        "all_ok": bool(np.all(status == 0)),
+        "steps_mean": float(np.mean(steps)),
+        "steps_max": int(np.max(steps)),
+        "x": x,
+        "kappa": kappa,
+        "k_r": k_r,
+    }
+
+
+def scale_rows(n: int, repeats: int, one_by_one: bool = False) -> list[dict]:
+    """Throughput on the first device alone, then on all visible devices."""
+    import jax
+
+    rows = []
+    for devices in (jax.devices()[:1], jax.devices()):
+        row = run_sweep(n, repeats, devices=devices, one_by_one=one_by_one)
+        rows.append({k: v for k, v in row.items() if k not in ("x", "kappa", "k_r")})
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    import jax
+
+    import jaxunilat  # noqa: F401  (float64)
+
+    argv = sys.argv[1:] if argv is None else argv
+    n, repeats = int(argv[0]), int(argv[1])
+    rows = scale_rows(n, repeats, one_by_one="--one-by-one" in argv[2:])
+    print(json.dumps({"platform": jax.default_backend(), "device_count": jax.device_count(), "rows": rows}))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

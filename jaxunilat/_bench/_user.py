@@ -1,0 +1,356 @@
+"""The benchmark's goals P7–P9, measured the way users write code.
+
+One scene for all three: Table 1 example 2 from the lower racket, event mode at
+rtol = atol = 1e-10, 201 save times over [0, 1] s, every other option at its default
+(`simulate`'s outputs, buffers and `throw`), written as a user would (`USER_CODE`):
+
+- P7 (`vmap_against_rows`): `jax.jit(jax.vmap(f))` over N values of κ (±20 % about
+  Table 1's) against `jaxunilat.sweep(f, kappas, batch_size=1)`, the rows one by one,
+  unbatched, both on the same single device; the ratio of their warm medians.
+- P8 (`reverse_against_forward`): `jax.jit(jax.grad(loss))` of a misfit (mean square of
+  the trace against data plus mean square of the impact times against the data's) in
+  (κ, k_r), against `jax.jit(loss)`, one forward solve of the same run; warm medians.
+  Forward mode (`autodiff="forward"` with `jax.jacfwd`) beside it.
+- P9 (`command_line`): wall time of `jaxunilat simulate ball --solver event` run twice,
+  each in a fresh process (`sys.executable -m jaxunilat`) sharing a new, empty
+  persistent compilation cache (`JAXUNILAT_CACHE_DIR`); the second against the first.
+  `identify` (the bundled data) and `reproduce --quick` likewise, where the size has them.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+#: The users' scene: Table 1 example 2 over [0, 1] s, 201 save times, event mode at 1e-10.
+USER_T1 = 1.0
+USER_SAMPLES = 201
+USER_TOL = 1e-10
+#: κ of P7's rows: Table 1 example 2's, ±20 %.
+KAPPA_SPREAD = 0.2
+#: P8's parameters against those that made its data: κ 10 % higher, k_r 10 % lower.
+MISFIT = (1.1, 0.9)
+
+#: What P7 and P8 time, as a user writes it (`bench.json` carries it as the goals' `reproduce`).
+USER_CODE = """\
+import jax, jax.numpy as jnp, numpy as np
+import jaxunilat as ju
+ju.use_loop_kernels()
+y0 = (-0.4, -1 / 0.122)
+def run(kappa, k_r=0.2, autodiff="reverse"):
+    return ju.simulate(ju.Ball.table1(2, kappa=kappa, k_r=k_r), y0, 1.0, solver="event",
+                       rtol=1e-10, atol=1e-10, samples=201, autodiff=autodiff)
+def f(kappa):
+    return run(kappa).ys["x"]
+# P7: N rows, vmapped against one by one (same device)
+kappas = 1e4 * np.linspace(0.8, 1.2, N)
+vmapped = jax.jit(jax.vmap(f)); vmapped(kappas)
+ju.sweep(f, kappas, batch_size=1, devices=jax.devices()[:1])
+# P8: a misfit against data made at (1e4, 0.2), at theta = (1.1e4, 0.18)
+data = run(1e4); x_obs = data.ys["x"]
+n = int(np.sum(np.isfinite(ju.impact_times(data, 64))))  # the data's impacts
+t_obs = ju.impact_times(data, n)
+def loss(theta, autodiff="reverse"):
+    sol = run(theta[0], theta[1], autodiff)
+    return jnp.mean((sol.ys["x"] - x_obs) ** 2) + jnp.mean((ju.impact_times(sol, n) - t_obs) ** 2)
+theta = jnp.array([1.1e4, 0.18])
+jax.jit(loss)(theta); jax.jit(jax.grad(loss))(theta)
+jax.jit(jax.jacfwd(lambda th: loss(th, "forward")))(theta)
+"""
+
+
+def _run(kappa, k_r=None, autodiff="reverse"):
+    """The users' scene at (κ, k_r) (k_r default: Table 1 example 2's)."""
+    from .._models._ball import Ball
+    from .._solver._simulate import simulate
+    from ._scale import Y0
+
+    overrides = {"kappa": kappa} if k_r is None else {"kappa": kappa, "k_r": k_r}
+    return simulate(
+        Ball.table1(2, **overrides),
+        np.asarray(Y0),
+        USER_T1,
+        solver="event",
+        rtol=USER_TOL,
+        atol=USER_TOL,
+        samples=USER_SAMPLES,
+        autodiff=autodiff,
+    )
+
+
+def _timed(fns, size, timed_together):
+    """(compile times, timings) of calls compared with each other: `timed_together` with
+    two warm-up rounds, the first with compilation, so that the number of runs follows the
+    warm call's time (not the compile's)."""
+    timings = timed_together(fns, size, warm_ups=2)
+    return [max(t.first - t.median, 0.0) for t in timings], timings
+
+
+def user_row(kappa):
+    """P7's f: one row, the saved positions (m). A module-level function: `sweep`
+    caches its compiled program per function object."""
+    return _run(kappa).ys["x"]
+
+
+def kappa_rows(n: int) -> np.ndarray:
+    """P7's rows: n values of κ evenly over Table 1 example 2's ±20 % (N/m)."""
+    from .._models._ball import TABLE1
+
+    kappa = TABLE1[2][0]
+    return kappa * np.linspace(1.0 - KAPPA_SPREAD, 1.0 + KAPPA_SPREAD, n)
+
+
+# -- P7 -----------------------------------------------------------------------------------
+
+
+def vmap_against_rows(size, timed_together, log) -> dict:
+    """P7: `jax.jit(jax.vmap(f))` against `sweep(f, ..., batch_size=1)` on one device."""
+    import jax
+
+    from .._solver._sweep import sweep
+
+    n = size.user_n
+    kappas = kappa_rows(n)
+    device = jax.devices()[0]
+    vmapped = jax.jit(jax.vmap(user_row))
+    kappas_on_device = jax.device_put(kappas, device)
+    compile_s, (vm, seq) = _timed(
+        [
+            lambda: jax.block_until_ready(vmapped(kappas_on_device)),
+            lambda: jax.block_until_ready(sweep(user_row, kappas, batch_size=1, devices=[device])),
+        ],
+        size,
+        timed_together,
+    )
+    x_vm, x_seq = np.asarray(vm.out), np.asarray(seq.out)
+    out = {
+        "scene": _scene(),
+        "n": n,
+        "kappa_range": [float(kappas[0]), float(kappas[-1])],
+        "device": str(device),
+        "vmap": "jax.jit(jax.vmap(f))(kappas)",
+        "sequential": "jaxunilat.sweep(f, kappas, batch_size=1, devices=[device])",
+        "vmap_s": vm.median,
+        "sequential_s": seq.median,
+        "vmap_per_row_s": vm.median / n,
+        "sequential_per_row_s": seq.median / n,
+        "ratio": vm.median / seq.median,
+        "ratio_of_fastest_runs": vm.min / seq.min,
+        "vmap_compile_s": compile_s[0],
+        "sequential_compile_s": compile_s[1],
+        "runs": vm.runs,
+        # Both ways compute the same rows (rounding level apart).
+        "max_abs_difference_m": float(np.max(np.abs(x_vm - x_seq))) if x_vm.shape == x_seq.shape else None,
+    }
+    log(
+        f"  P7 N = {n}: jit(vmap(f)) {1e6 * out['vmap_per_row_s']:.1f} us/row, sweep(batch_size=1) "
+        f"{1e6 * out['sequential_per_row_s']:.1f} us/row on {out['device']}: ratio {out['ratio']:.2f} "
+        f"(compile {out['vmap_compile_s']:.1f} s / {out['sequential_compile_s']:.1f} s)"
+    )
+    return out
+
+
+# -- P8 -----------------------------------------------------------------------------------
+
+
+def _misfit_data():
+    """The data of P8's misfit: the trace and the impact times at Table 1 example 2's (κ, k_r)."""
+    import jax
+
+    from .._models._ball import TABLE1
+    from .._solver._observe import impact_times
+
+    kappa, k_r = TABLE1[2]
+    data = jax.block_until_ready(_run(kappa, k_r))
+    fitted = jax.block_until_ready(_run(MISFIT[0] * kappa, MISFIT[1] * k_r))
+    # Impacts in both runs (the data's and the starting point's), so the misfit is finite.
+    n = int(min(np.sum(np.isfinite(np.asarray(impact_times(s, 64)))) for s in (data, fitted)))
+    return data.ys["x"], impact_times(data, n), n
+
+
+def reverse_against_forward(size, timed_together, log) -> dict:
+    """P8: `jax.jit(jax.grad(loss))` against `jax.jit(loss)` (and `jax.jacfwd` in forward mode)."""
+    import jax
+    import jax.numpy as jnp
+
+    from .._models._ball import TABLE1
+    from .._solver._observe import impact_times
+
+    x_obs, t_obs, n = _misfit_data()
+
+    def loss(theta, autodiff="reverse"):
+        sol = _run(theta[0], theta[1], autodiff)
+        return jnp.mean((sol.ys["x"] - x_obs) ** 2) + jnp.mean((impact_times(sol, n) - t_obs) ** 2)
+
+    theta = jnp.array([MISFIT[0] * TABLE1[2][0], MISFIT[1] * TABLE1[2][1]])
+    forward = jax.jit(loss)
+    reverse = jax.jit(jax.grad(loss))
+    forward_mode = jax.jit(jax.jacfwd(lambda th: loss(th, "forward")))
+    compile_s, (fw, rev, fwd_mode) = _timed(
+        [
+            lambda: jax.block_until_ready(forward(theta)),
+            lambda: jax.block_until_ready(reverse(theta)),
+            lambda: jax.block_until_ready(forward_mode(theta)),
+        ],
+        size,
+        timed_together,
+    )
+    g_rev, g_fwd = np.asarray(rev.out), np.asarray(fwd_mode.out)
+    out = {
+        "scene": _scene(),
+        "loss": f"mean((x - x_obs)^2) [m^2] + mean((t_imp - t_obs)^2) [s^2] over the first {n} impacts; "
+        f"data at Table 1 example 2's (kappa, k_r), theta = ({MISFIT[0]:g} kappa, {MISFIT[1]:g} k_r)",
+        "impacts": n,
+        "theta": [float(v) for v in np.asarray(theta)],
+        "loss_value": float(fw.out),
+        "forward": "jax.jit(loss)(theta)",
+        "reverse": "jax.jit(jax.grad(loss))(theta)",
+        "forward_mode": 'jax.jit(jax.jacfwd(loss with autodiff="forward"))(theta)',
+        "forward_s": fw.median,
+        "reverse_s": rev.median,
+        "forward_mode_s": fwd_mode.median,
+        "ratio": rev.median / fw.median,
+        "ratio_of_fastest_runs": rev.min / fw.min,
+        "forward_mode_ratio": fwd_mode.median / fw.median,
+        "forward_compile_s": compile_s[0],
+        "reverse_compile_s": compile_s[1],
+        "forward_mode_compile_s": compile_s[2],
+        "runs": fw.runs,
+        "gradient": [float(v) for v in g_rev],
+        "gradient_forward_mode": [float(v) for v in g_fwd],
+        # The two modes' gradients agree (a check that both measured the same thing).
+        "modes_max_rel_difference": float(np.max(np.abs(g_rev - g_fwd) / np.abs(g_fwd))),
+    }
+    log(
+        f"  P8 jax.grad(loss) {out['ratio']:.1f}x jax.jit(loss) (forward {1e3 * out['forward_s']:.2f} ms, "
+        f"reverse {1e3 * out['reverse_s']:.2f} ms, compile {out['reverse_compile_s']:.1f} s); forward mode "
+        f"(jax.jacfwd) {out['forward_mode_ratio']:.1f}x; modes agree to {out['modes_max_rel_difference']:.1e}"
+    )
+    return out
+
+
+def _scene() -> str:
+    return (
+        f"Table 1 example 2, y0 = (-0.4 m, -1/0.122 m/s), [0, {USER_T1:g}] s, {USER_SAMPLES} save times, "
+        f"event mode rtol = atol = {USER_TOL:g}, other options at their defaults"
+    )
+
+
+# -- P9 -----------------------------------------------------------------------------------
+
+#: P9's commands: name -> the arguments after `jaxunilat` (`{out}`: a folder in the run's
+#: working directory, a temporary one).
+CLI_COMMANDS = {
+    "simulate": ("simulate", "ball", "--solver", "event"),
+    "identify": ("identify",),
+    "reproduce": ("reproduce", "--quick", "--out", "{out}"),
+}
+
+
+def _child_env(cache: str) -> dict:
+    """The user's environment for a child `jaxunilat`: this one, with the cache in `cache`
+    and on, without the CPU device count this process gave itself (`host_devices`), and
+    with this copy of the package first on the path."""
+    from . import _scale as _bench_scale
+
+    env = dict(os.environ)
+    env.pop("JAXUNILAT_NO_CACHE", None)
+    env["JAXUNILAT_CACHE_DIR"] = cache
+    flags = env.get("XLA_FLAGS", "")
+    if _bench_scale.ADDED_XLA_FLAG:
+        flags = " ".join(flags.replace(_bench_scale.ADDED_XLA_FLAG, " ").split())
+    if flags:
+        env["XLA_FLAGS"] = flags
+    else:
+        env.pop("XLA_FLAGS", None)
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH", "")) if p)
+    return env
+
+
+def _cache_files(path: str) -> tuple[int, int]:
+    names = [os.path.join(path, f) for f in os.listdir(path)] if os.path.isdir(path) else []
+    return len(names), sum(os.path.getsize(f) for f in names if os.path.isfile(f))
+
+
+def _cli_pair(name: str, log) -> dict:
+    """Run one command twice, each in a fresh process, on one new cache directory."""
+    work = tempfile.mkdtemp(prefix=f"jaxunilat-bench-{name}-")
+    cache = os.path.join(work, "cache")
+    try:
+        env = _child_env(cache)
+        runs = []
+        for i in (1, 2):
+            args = [a.format(out=os.path.join(work, f"out{i}")) for a in CLI_COMMANDS[name]]
+            start = time.perf_counter()
+            proc = subprocess.run(
+                [sys.executable, "-m", "jaxunilat", *args],
+                env=env,
+                cwd=work,
+                capture_output=True,
+                text=True,
+                check=False,
+            )
+            wall = time.perf_counter() - start
+            files, size = _cache_files(cache)
+            runs.append(
+                {"wall_s": wall, "returncode": proc.returncode, "cache_files": files, "cache_bytes": size}
+            )
+            if proc.returncode != 0:
+                tail = (proc.stderr.strip().splitlines() or ["no output"])[-1]
+                runs[-1]["error"] = tail
+                break
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    ok = len(runs) == 2 and all(r["returncode"] == 0 for r in runs)
+    row = {
+        "command": "jaxunilat " + " ".join(a.replace("{out}", "DIR") for a in CLI_COMMANDS[name]),
+        "first_s": runs[0]["wall_s"],
+        "second_s": runs[1]["wall_s"] if len(runs) == 2 else None,
+        "ratio": runs[1]["wall_s"] / runs[0]["wall_s"] if ok else None,
+        "ok": ok,
+        "runs": runs,
+    }
+    if ok:
+        log(
+            f"  P9 {row['command']}: first {row['first_s']:.2f} s, second {row['second_s']:.2f} s "
+            f"(ratio {row['ratio']:.2f}; cache {runs[0]['cache_files']} files, {runs[0]['cache_bytes'] / 1e6:.1f} MB)"
+        )
+    else:
+        log(f"  P9 {row['command']}: failed: {runs[-1].get('error')}")
+    return row
+
+
+def _import_s() -> float | None:
+    """Wall time of a fresh process that only imports jaxunilat: the floor of any command."""
+    start = time.perf_counter()
+    proc = subprocess.run(
+        [sys.executable, "-c", "import jaxunilat"], env=_child_env(tempfile.gettempdir()), capture_output=True
+    )
+    return time.perf_counter() - start if proc.returncode == 0 else None
+
+
+def command_line(size, log) -> dict:
+    """P9: each command of `size.user_cli` twice in fresh processes on a new compilation cache."""
+    out = {
+        "how": "each command twice, each a fresh process (sys.executable -m jaxunilat) with "
+        "JAXUNILAT_CACHE_DIR a new empty directory for the pair and this process's environment "
+        "otherwise (less the CPU device count the bench gave itself); wall time of the process",
+        "import_s": _import_s(),
+        "commands": {},
+    }
+    if out["import_s"] is not None:
+        log(f"  P9 a fresh process that imports jaxunilat: {out['import_s']:.2f} s")
+    for name in CLI_COMMANDS:
+        if name in size.user_cli:
+            out["commands"][name] = _cli_pair(name, log)
+        else:
+            why = "slow for this size" if name == "reproduce" else "left out at this size"
+            out["commands"][name] = {"status": f"skipped at size {size.name} ({why})"}
+    return out

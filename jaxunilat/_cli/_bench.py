@@ -1,0 +1,74 @@
+"""`jaxunilat bench [--quick] [--out DIR]`: the benchmark command (needs scipy: the `bench` extra)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+#: The files `bench` writes into its --out folder.
+OUTPUT_FILES = ("bench.json", "work_precision.png", "throughput.png")
+
+
+def add_bench(commands) -> None:
+    """Add the `bench` command to the top-level subparsers."""
+    p = commands.add_parser(
+        "bench",
+        help="benchmark run time against error, throughput, gradient cost and compile time",
+        description="Benchmark Table 1 example 2 [K90] against scipy and NumPy peers in the same run; "
+        "write bench.json, work_precision.png and throughput.png and print the goal ratios P1-P5 and P7-P9 "
+        "(plain vmap, jax.grad and the command line's second run, as users write them). "
+        'Needs scipy: pip install "jaxunilat[bench]".',
+    )
+    p.add_argument("--quick", action="store_true", help="a reduced run (under 3 minutes)")
+    p.add_argument("--out", metavar="DIR", default="bench_out", help="output folder (default bench_out)")
+    # For the test suite only: the smallest settings that still run every section.
+    p.add_argument("--size", choices=("full", "quick", "tiny"), default=None, help=argparse.SUPPRESS)
+    p.set_defaults(func=_run_bench)
+
+
+def _run_bench(args) -> int:
+    from ..internal._io import check_output_dir
+    from ._main import EXIT_OK, RunError, UsageError
+
+    out = args.out
+    check_output_dir("--out", out, OUTPUT_FILES)
+    try:
+        import scipy  # noqa: F401
+    except ImportError:
+        raise UsageError(
+            'jaxunilat bench needs scipy; install it with: pip install "jaxunilat[bench]"'
+        ) from None
+    size = args.size or ("quick" if args.quick else "full")
+    try:
+        os.makedirs(out, exist_ok=True)
+    except OSError as err:
+        raise RunError(f"cannot create --out {out!r}: {err}") from None
+
+    import json
+
+    from .._bench._scale import host_devices
+
+    # Before anything computes: one CPU device per core, so that sweeps use every core.
+    host_devices()
+    # The bench measures compile times (P5 and every compile_s): no persistent compilation
+    # cache in this process (P9 measures the cache, in child processes with a new one).
+    import jax
+
+    jax.config.update("jax_enable_compilation_cache", False)
+
+    from .._bench._main import goal_table, run_bench
+    from .._bench._plot import throughput_figure, work_precision_figure
+
+    result = run_bench(size, log=lambda line: print(line, flush=True))
+    paths = {name: os.path.join(out, name) for name in OUTPUT_FILES}
+    try:
+        with open(paths["bench.json"], "w", encoding="utf-8") as fh:
+            json.dump(result, fh, indent=1, allow_nan=False)
+        work_precision_figure(result).savefig(paths["work_precision.png"], dpi=120)
+        throughput_figure(result).savefig(paths["throughput.png"], dpi=120)
+    except OSError as err:
+        raise RunError(f"cannot write output: {err}") from None
+    print()
+    print(goal_table(result))
+    print(f"\nwrote {', '.join(paths.values())} ({result['total_s']:.0f} s)")
+    return EXIT_OK

@@ -1,0 +1,133 @@
+"""`jaxunilat identify`: fit κ and k_r to a data file and report them with uncertainty."""
+
+from __future__ import annotations
+
+import os
+
+
+def default_data_path() -> str:
+    """The bundled default data set, `data/drop_trace.csv` (a synthetic 1 kHz drop test)."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    for root in (os.path.join(here, os.pardir), os.getcwd()):
+        path = os.path.normpath(os.path.join(root, "data", "drop_trace.csv"))
+        if os.path.isfile(path):
+            return path
+    raise ValueError(
+        "no DATA given and the bundled data/drop_trace.csv was not found (it ships with the source tree); "
+        "pass a data file: jaxunilat identify DATA.csv"
+    )
+
+
+def add_identify(commands) -> None:
+    p = commands.add_parser(
+        "identify",
+        help="fit contact stiffness kappa and damping k_r to rebound data, with uncertainty",
+        description="Fit kappa and k_r of the ball model [K90 Eq. 3.1-3.3] to one or several rebound data "
+        "files (format: data/README.md; `jaxunilat import` converts recordings) with the event mode; report "
+        "estimates, 95% CIs, derived e and t_c, correlations, outliers and an identifiability verdict. "
+        "Several files are fitted jointly: kappa, k_r (and drag) shared, each file its own x0, v0, offset. "
+        "Exit status: 0 converged, 3 not converged (the JSON is still written, with converged: false), "
+        "2 bad input.",
+    )
+    p.add_argument(
+        "data",
+        nargs="*",
+        metavar="DATA.csv",
+        help="data files, fitted jointly (default: the bundled data/drop_trace.csv)",
+    )
+    p.add_argument("--json", metavar="OUT.json", help="write the fit as JSON")
+    p.add_argument("--plot", metavar="OUT.png", help="draw the data against the fit, with residuals and e(v)")
+    p.add_argument("--starts", type=int, default=3, help="number of starts (default 3)")
+    p.add_argument(
+        "--fit",
+        default="",
+        metavar="NAMES",
+        help="nuisance parameters to fit too, comma-separated from drag,x0,v0,offset (offset: the recording's "
+        "unknown time origin, for impact onsets and traces)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of the starts' jitter (default 0)")
+    p.add_argument("--method", choices=("lm", "optax"), default="lm", help="lm (default) or optax then lm")
+    p.add_argument(
+        "--law",
+        choices=("kelvin-voigt", "hunt-crossley", "auto"),
+        default="kelvin-voigt",
+        help="contact law: kelvin-voigt (default, the paper's), hunt-crossley (n = 3/2: e falls with impact "
+        "speed), or auto (fit both, compare chi-square, AIC and BIC, keep the lower BIC)",
+    )
+    p.add_argument(
+        "--keep-outliers",
+        action="store_true",
+        help="fit every row by least squares (default: a robust Cauchy pass, then rows beyond "
+        "--outlier-threshold robust sd are excluded and listed)",
+    )
+    p.add_argument(
+        "--outlier-threshold",
+        type=float,
+        default=4.0,
+        metavar="K",
+        help="exclude rows beyond K robust residual sd (1.4826 x median |residual|); default 4",
+    )
+    p.add_argument(
+        "--holdout",
+        type=float,
+        default=0.0,
+        metavar="F",
+        help="fit the first (1 - F) of each file's rows and predict the rest (0 <= F < 1; default 0)",
+    )
+    p.add_argument("--profile", action="store_true", help="also compute the profile likelihood of kappa")
+    p.set_defaults(func=_run_identify)
+
+
+#: Exit status of a fit that did not converge (its JSON is still written).
+EXIT_NOT_CONVERGED = 3
+
+
+def _run_identify(args) -> int:
+    import json
+
+    from identify import NUISANCE, fit, load_dataset
+
+    from ..internal import EXIT_OK, RunError, check_output_paths
+
+    nuisance = tuple(name.strip() for name in args.fit.split(",") if name.strip())
+    for name in nuisance:
+        if name not in NUISANCE:
+            raise ValueError(f"--fit {name!r} is not a nuisance parameter; valid: {', '.join(NUISANCE)}")
+    if args.starts < 1:
+        raise ValueError(f"--starts {args.starts} is out of range; valid range is integers >= 1")
+    paths = list(args.data) or [default_data_path()]
+    inputs = [(f"DATA {i + 1}" if len(paths) > 1 else "DATA", path) for i, path in enumerate(paths)]
+    check_output_paths(("--json", args.json), ("--plot", args.plot), inputs=inputs)
+    data = [load_dataset(path) for path in paths]
+    result = fit(
+        data if len(data) > 1 else data[0],
+        nuisance=nuisance,
+        starts=args.starts,
+        seed=args.seed,
+        method=args.method,
+        profile=args.profile,
+        progress=True,
+        law=args.law,
+        keep_outliers=args.keep_outliers,
+        outlier_threshold=args.outlier_threshold,
+        holdout=args.holdout,
+    )
+    print(result.report())
+    try:
+        if args.json is not None:
+            with open(args.json, "w", encoding="utf-8") as fh:
+                json.dump(result.to_json_dict(), fh, indent=2, allow_nan=False)
+            print(f"wrote {args.json}")
+        if args.plot is not None:
+            from identify import plot_fit
+
+            from ..plot import save_figure
+
+            save_figure(plot_fit(result), args.plot)
+            print(f"wrote {args.plot}")
+    except OSError as err:
+        raise RunError(f"cannot write output: {err}") from None
+    if not result.converged:
+        print(f"the fit did not converge ({result.message}): exit status {EXIT_NOT_CONVERGED}")
+        return EXIT_NOT_CONVERGED
+    return EXIT_OK

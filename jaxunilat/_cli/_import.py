@@ -1,0 +1,162 @@
+"""`jaxunilat import wav|phyphox|video SOURCE --out DATA.csv`: recordings to data files.
+
+    jaxunilat import wav SOURCE.wav --out DATA.csv [--mass M] [--drag K] [--x0 H] [--v0 V]
+                     [--noise S] [--plot PNG] [--threshold K] [--dead-time S] [--min-gap S]
+    jaxunilat import phyphox SOURCE.csv|.xlsx --out DATA.csv [...]
+    jaxunilat import video SOURCE.csv --out DATA.csv [--column NAME] [--scale F] [...]
+
+Prints what was found (onsets kept, those left out with reasons, warnings, the
+timing-noise estimate) and writes a `jaxunilat-data` file (data/README.md), the onsets
+left out as `##` comment lines. The source is only read; an output path that names it
+(another spelling, a symlink) is refused before any work.
+"""
+
+from __future__ import annotations
+
+_X0_IMPACTS = (
+    "release height x0, m (default: estimated from the first interval T1 assuming e = 0.95 and no drag, "
+    "x0 = g T1^2 / (8 e^2); the file says so in a ## comment)"
+)
+
+
+def _source_kind(sources, kind: str, *, source_help: str, x0_help: str, noise_help: str, **parser_kw):
+    """Add the `import KIND` subparser: SOURCE, the options every importer takes, `_run_import`."""
+    p = sources.add_parser(kind, **parser_kw)
+    p.add_argument("source", metavar="SOURCE", help=source_help)
+    p.add_argument(
+        "--out", metavar="DATA.csv", required=True, help="the data file to write (replaced if it exists)"
+    )
+    p.add_argument("--mass", type=float, help="ball mass, kg (default 2.7e-3, a 40 mm ITTF ball)")
+    p.add_argument("--drag", type=float, help="quadratic drag k = 1/terminal speed, s/m (default 0.12)")
+    p.add_argument("--x0", type=float, help=x0_help)
+    p.add_argument("--v0", type=float, help="velocity at t = 0, m/s (default 0: released from rest)")
+    p.add_argument("--noise", type=float, metavar="S", help=noise_help)
+    p.add_argument("--plot", metavar="PNG", help="draw what was imported (kept and rejected onsets)")
+    p.set_defaults(func=_run_import)
+    return p
+
+
+def add_import(commands) -> None:
+    """Add `import` (with its sources `wav`, `phyphox`, `video`) to the command table."""
+    p = commands.add_parser(
+        "import",
+        help="turn a recording (WAV, phyphox export, video-tracking CSV) into a data file",
+        description="Turn a real-world recording into a jaxunilat data file (format: data/README.md): impact "
+        "onsets from a WAV recording or a phyphox export, or a height trace from a video-tracking table. "
+        "Prints the onsets kept and those left out with reasons; the source file is only read.",
+    )
+    sources = p.add_subparsers(dest="source_kind", metavar="SOURCE_KIND", required=True, parser_class=type(p))
+
+    w = _source_kind(
+        sources,
+        "wav",
+        source_help="the WAV file (only read)",
+        x0_help=_X0_IMPACTS,
+        noise_help="onset-time standard deviation, s (default: the timing-noise estimate)",
+        help="impact onsets from a WAV recording of a bouncing ball",
+        description="Detect the impact clicks in a WAV file (PCM 16/24/32-bit or float 32/64-bit, mono or "
+        "stereo, 8-96 kHz): coarse detection above THRESHOLD x the robust noise floor with a dead time, then "
+        "the onset refined to the start of each click (where its envelope first exceeds 10% of its own "
+        "peak and 5 noise sigma). Quiet clicks where no bounce can be (the intervals of a ball decay "
+        "smoothly) and echoes closer than MIN_GAP to a louder click are rejected and reported. Writes "
+        "observe = impacts; noise defaults to the timing-noise estimate (the scatter of the intervals about "
+        "a smooth fit, /sqrt(2), at least one sample period).",
+    )
+    w.add_argument(
+        "--threshold", type=float, default=8.0, help="coarse detection level, in noise sigma (default 8)"
+    )
+    w.add_argument(
+        "--dead-time",
+        type=float,
+        default=0.02,
+        help="s after a detection during which no new click starts (default 0.02)",
+    )
+    w.add_argument(
+        "--min-gap",
+        type=float,
+        default=0.03,
+        help="s; a click closer than this to a louder one is an echo or double trigger (default 0.03)",
+    )
+
+    _source_kind(
+        sources,
+        "phyphox",
+        source_help="the export, .csv or .xlsx (only read)",
+        x0_help=_X0_IMPACTS,
+        noise_help="onset-time standard deviation, s (default: none, so a fit estimates it from its residuals)",
+        help="impact onsets from a phyphox Acoustic Stopwatch or (In)elastic collision export",
+        description="Read a phyphox export (CSV with comma, semicolon or tab separators and decimal point or "
+        "comma, detected; or .xlsx with openpyxl): the event-time column if present, else the cumulated "
+        "intervals. Rows with a zero or negative interval (duplicates) and junk rows after the data are left "
+        "out and reported; intervals that break the smooth decay (echoes, missed bounces) are kept and "
+        "reported as warnings, for a robust fit. Writes observe = impacts.",
+    )
+
+    v = _source_kind(
+        sources,
+        "video",
+        source_help="the tracking table, CSV (only read)",
+        x0_help="height at t = 0, m (default: the first sample's height)",
+        noise_help="position standard deviation, m (default: none, so a fit estimates it from its residuals)",
+        help="a height trace from a video-tracking table (Tracker and similar)",
+        description="Read a video-tracking CSV: a header row with units (t (s), y (cm)), possibly after a "
+        "preamble line such as Tracker's 'mass A'. Writes observe = trace with t (s, 0 = the first tracked "
+        "frame: video time zero is the first frame, not the release) and x (m).",
+    )
+    v.add_argument(
+        "--column", metavar="NAME", help="the height column (default: y if present, else the second column)"
+    )
+    v.add_argument(
+        "--scale",
+        type=float,
+        metavar="F",
+        help="metres per unit of the height column (default: from the header unit m, cm or mm; required if "
+        "the header has none)",
+    )
+
+
+def _run_import(args) -> int:
+    from ..internal import EXIT_OK, RunError, check_output_paths
+
+    check_output_paths(("--out", args.out), ("--plot", args.plot), inputs=(("SOURCE", args.source),))
+    if args.plot is not None:
+        import os
+
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+        suffix = os.path.splitext(args.plot)[1].lstrip(".").lower()
+        if suffix and suffix not in FigureCanvasAgg.get_supported_filetypes():
+            raise ValueError(
+                f"--plot {args.plot!r}: unsupported image format {suffix!r}; use e.g. .png, .pdf, .svg"
+            )
+    common = dict(mass=args.mass, drag=args.drag, x0=args.x0, v0=args.v0, noise=args.noise)
+    if args.source_kind == "wav":
+        from identify import import_wav
+
+        result = import_wav(
+            args.source, threshold=args.threshold, dead_time=args.dead_time, min_gap=args.min_gap, **common
+        )
+    elif args.source_kind == "phyphox":
+        from identify import import_phyphox
+
+        result = import_phyphox(args.source, **common)
+    else:
+        from identify import import_video
+
+        result = import_video(args.source, column=args.column, scale=args.scale, **common)
+    print(result.summary())
+    try:
+        result.write(args.out, overwrite=True)
+        print(f"{'wrote':<10} {args.out} ({result.dataset.observe}: {result.dataset.num_rows} rows)")
+        if args.plot is not None:
+            from ..plot import save_figure
+
+            if args.source_kind == "wav":
+                from identify import plot_detection as plot
+            else:
+                from identify import plot_table_import as plot
+            save_figure(plot(result), args.plot)
+            print(f"{'wrote':<10} {args.plot}")
+    except OSError as err:
+        raise RunError(f"cannot write output: {err}") from None
+    return EXIT_OK

@@ -1,0 +1,415 @@
+"""The table-tennis ball between two rackets [K90 §3, Eq. 3.1–3.3, Table 1]."""
+
+from __future__ import annotations
+
+import math
+from typing import ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike
+
+from ..internal._validate import float_field, is_concrete
+from . import _rest
+from ._contact import AbstractContactLaw, ClampedKelvinVoigt, HuntCrossley, KelvinVoigt, rk4_step_limit
+from ._flight import apex_rise, apex_time, fall_time, flight_state, longest_fall, rise_time
+from ._heaviside import AbstractHeaviside, Exact
+from ._model import AbstractModel
+
+#: A closed-form flight whose apex is within this many ulps of the upper wall grazes it
+#: without contact (see `Ball.flight_events`).
+_GRAZE_ULPS = 64
+
+#: The paper's constants [K90 §5.1]: gap 2a (m), mass (kg), gravity (m/s²), drag k (s/m).
+PAPER_GAP = 0.8
+PAPER_MASS = 2.37e-3
+PAPER_GRAVITY = 9.81
+PAPER_DRAG = 0.122
+
+#: Table 1 of [K90]: example → (κ [N/m], k_r [N·s/m]).
+TABLE1 = {
+    1: (1.0e4, 0.1),
+    2: (1.0e4, 0.2),
+    3: (1.0e4, 0.4),
+    4: (5.0e3, 0.2),
+    5: (2.0e4, 0.2),
+}
+
+
+class Ball(AbstractModel):
+    """A ball moving vertically between two walls (rackets) with quadratic air drag.
+
+    State y = (x, v): position (m, upward positive, origin mid-way between the
+    rackets) and velocity (m/s). The equation of motion [K90 Eq. 3.1–3.2] is
+
+        m v' = F_lower − F_upper − k² m g |v| v − m g
+
+    where F_lower and F_upper are the contact law's repulsive forces. With the
+    default `KelvinVoigt` law and walls at ±a this is exactly the paper's
+    m ẍ = P(x) − k² m g |ẋ| ẋ − m g − k_r ẋ [H(x − a) + H(−x − a)].
+
+    **Arguments:**
+
+    - `kappa`: contact stiffness κ, N/m (> 0).
+    - `k_r`: contact damping, N·s/m (≥ 0); `None` removes the damping term.
+    - `mass`: m, kg (> 0). Default: the paper's 2.37e-3.
+    - `gravity`: g, m/s² (≥ 0). Default 9.81.
+    - `drag`: k = 1/v_max, s/m (≥ 0), v_max being the terminal speed; `None`
+      removes the drag term. Default: the paper's 0.122.
+    - `lower`: the lower wall's position, m, or `None` (absent). Default −0.4.
+    - `upper`: the upper wall's position, m, or `None` (absent). Default +0.4.
+    - `heaviside`: the Heaviside option (`Exact()`, `Logistic(eps)`, `Softplus(eps)`).
+    - `law`: the contact law (`KelvinVoigt()`, `HuntCrossley(n)`, `ClampedKelvinVoigt()`).
+
+    Whether `k_r`, `drag`, `lower` and `upper` are `None` is static structure;
+    their values are traced, so changing them does not recompile.
+    """
+
+    kappa: Array = eqx.field(converter=float_field("kappa", "N/m"))
+    k_r: Array | None = eqx.field(converter=float_field("k_r", "N*s/m", optional=True), default=0.2)
+    mass: Array = eqx.field(converter=float_field("mass", "kg"), default=PAPER_MASS)
+    gravity: Array = eqx.field(converter=float_field("gravity", "m/s^2"), default=PAPER_GRAVITY)
+    drag: Array | None = eqx.field(converter=float_field("drag", "s/m", optional=True), default=PAPER_DRAG)
+    lower: Array | None = eqx.field(
+        converter=float_field("lower", "m", optional=True), default=-PAPER_GAP / 2
+    )
+    upper: Array | None = eqx.field(converter=float_field("upper", "m", optional=True), default=PAPER_GAP / 2)
+    heaviside: AbstractHeaviside = Exact()
+    law: AbstractContactLaw = KelvinVoigt()
+
+    state_names: ClassVar[tuple[str, ...]] = ("x", "v")
+    output_names: ClassVar[tuple[str, ...]] = (
+        "x",
+        "v",
+        "force",
+        "penetration",
+        "energy",
+        "contact",
+    )
+
+    def _ranges(self):
+        """(name, value, valid range as `check_range` keywords) of each parameter present."""
+        ranges = [
+            ("kappa", self.kappa, dict(lo=0.0, lo_open=True, unit="N/m")),
+            ("k_r", self.k_r, dict(lo=0.0, unit="N*s/m")),
+            ("mass", self.mass, dict(lo=0.0, lo_open=True, unit="kg")),
+            ("gravity", self.gravity, dict(lo=0.0, unit="m/s^2")),
+            ("drag", self.drag, dict(lo=0.0, unit="s/m")),
+            ("lower", self.lower, dict(unit="m")),
+            ("upper", self.upper, dict(unit="m")),
+        ]
+        if self.lower is not None and self.upper is not None:
+            ranges.append(
+                ("gap (upper - lower)", self.upper - self.lower, dict(lo=0.0, lo_open=True, unit="m"))
+            )
+        eps = getattr(self.heaviside, "eps", None)
+        if eps is not None:
+            ranges.append(("eps", eps, dict(lo=0.0, lo_open=True, unit="m")))
+        return [(name, value, kw) for name, value, kw in ranges if value is not None]
+
+    def __check_init__(self):
+        self._check_fields()
+
+    @classmethod
+    def table1(cls, example: int = 2, **overrides) -> Ball:
+        """The paper's ball for a Table 1 example (1–5) [K90 §5.1].
+
+        Walls at ±0.4 m, m = 2.37e-3 kg, g = 9.81 m/s², k = 0.122 s/m and the
+        example's κ and k_r. Keyword `overrides` replace any field.
+        """
+        if example not in TABLE1:
+            raise ValueError(f"example = {example!r} is out of range; valid Table 1 examples are 1-5")
+        kappa, k_r = TABLE1[example]
+        kwargs = dict(kappa=kappa, k_r=k_r)
+        kwargs.update(overrides)
+        return cls(**kwargs)
+
+    def check_initial_state(self, y0) -> None:
+        """Raise `ValueError` when x0 lies inside a wall: the start must be between the
+        walls, ends included (the paper starts at the lower wall). A start inside a wall
+        by at most 10·m·g/κ (ten static sags: a ball resting in contact, m) plus rounding
+        is allowed. Skipped for traced values."""
+        x0 = y0[0]
+        walls = [w for w in (self.lower, self.upper) if w is not None]
+        if not walls or not all(is_concrete(v) for v in (x0, *walls)):
+            return
+        x = float(np.asarray(x0))
+        lo = -math.inf if self.lower is None else float(np.asarray(self.lower))
+        hi = math.inf if self.upper is None else float(np.asarray(self.upper))
+        if lo <= x <= hi:
+            return
+        depth, wall = (lo - x, "lower") if x < lo else (x - hi, "upper")
+        if all(is_concrete(v) for v in (self.mass, self.gravity, self.kappa)):
+            sag = (
+                float(np.asarray(self.mass)) * float(np.asarray(self.gravity)) / float(np.asarray(self.kappa))
+            )
+        else:
+            sag = 0.0
+        ulps = 64 * np.finfo(float).eps * max(abs(x), *(abs(v) for v in (lo, hi) if math.isfinite(v)))
+        allowed = 10 * sag + ulps
+        if depth <= allowed:
+            return
+        raise ValueError(
+            f"x0 = {x:g} m is out of range; valid range is [{lo:g}, {hi:g}] m, between the walls "
+            f"(it starts {depth:.3g} m inside the {wall} wall; at most 10*m*g/kappa = {10 * sag:.2g} m, "
+            "a ball resting in contact, is allowed)"
+        )
+
+    def rk4_step_limit(self, xp=jnp):
+        """The largest RK4 step, s, and the contact time, s: a tenth of the Kelvin–Voigt
+        contact time t_c = π/ω_d of κ, k_r and m (see `jaxunilat._models._contact.rk4_step_limit`).
+        `None` without walls, and for `HuntCrossley` (its stiffness depends on depth)."""
+        if self.num_switches == 0 or not isinstance(self.law, (KelvinVoigt, ClampedKelvinVoigt)):
+            return None
+        return rk4_step_limit(self.kappa, self.k_r, self.mass, xp)
+
+    # -- physics ------------------------------------------------------------------
+
+    def _wall_terms(self, x, v, mask=None):
+        """Per wall: (penetration, switch, repulsive force along +x).
+
+        With `mask` (one bool per present wall, lower first) the exact model of that
+        region is used: H is the mask and δ = mask·(wall distance). This is the smooth
+        right-hand side the event mode integrates.
+        """
+        h = self.heaviside
+        terms = []
+        walls = []
+        if self.lower is not None:
+            walls.append((self.lower - x, -v, 1.0))
+        if self.upper is not None:
+            walls.append((x - self.upper, v, -1.0))
+        for i, (z, rate, sign) in enumerate(walls):
+            if mask is None:
+                pen, on = h.ramp(z), h.step(z)
+            else:
+                on = mask[i].astype(z.dtype)
+                pen = on * z
+            terms.append((pen, on, sign * self.law.force(pen, rate, on, self.kappa, self.k_r)))
+        return terms
+
+    def contact_force(self, x: Array, v: Array, mask: Array | None = None) -> Array:
+        """The total contact force on the ball, N (positive upward)."""
+        force = jnp.zeros_like(x)
+        for _, _, f in self._wall_terms(x, v, mask):
+            force = force + f
+        return force
+
+    def acceleration(
+        self, x: Array, v: Array, mask: Array | None = None, direction: Array | None = None
+    ) -> Array:
+        """ẍ, m/s² [K90 Eq. 3.1].
+
+        With `direction` (±1, the sign of v in an event-mode piece) the drag's |v|·v is
+        written direction·v², its smooth continuation through v = 0.
+        """
+        a = self.contact_force(x, v, mask) / self.mass - self.gravity
+        if self.drag is not None:
+            speed_v = jnp.abs(v) * v if direction is None else direction * v * v
+            a = a - self.drag**2 * self.gravity * speed_v
+        return a
+
+    def vector_field(self, t, y, args=None):
+        x, v = y[0], y[1]
+        return jnp.stack([v, self.acceleration(x, v)])
+
+    # -- the event mode's view: switching functions and smooth regions ------------
+
+    @property
+    def num_switches(self) -> int:
+        """How many walls are present (static)."""
+        return int(self.lower is not None) + int(self.upper is not None)
+
+    @property
+    def wall_names(self) -> tuple[str, ...]:
+        """Names of the present walls, in switch order (static)."""
+        return tuple(n for n, w in (("lower", self.lower), ("upper", self.upper)) if w is not None)
+
+    @property
+    def contact_mass(self) -> Array:
+        """The mass that turns accelerations into contact forces, kg."""
+        return self.mass
+
+    def switches(self, y: Array) -> Array:
+        """Signed distances into the walls, m, lower first: g_i > 0 ⇔ wall i in contact."""
+        x = y[0]
+        g = []
+        if self.lower is not None:
+            g.append(self.lower - x)
+        if self.upper is not None:
+            g.append(x - self.upper)
+        return jnp.stack(g)
+
+    def region_vector_field(self, t, y, mask, direction=None):
+        """dy/dt of the exact model with the contacts given by `mask` held fixed, and
+        (with `direction`, ±1) the drag's sign held fixed: a smooth right-hand side."""
+        x, v = y[0], y[1]
+        return jnp.stack([v, self.acceleration(x, v, mask, direction)])
+
+    @property
+    def observable_kink(self) -> bool:
+        """Whether the right-hand side has a kink where the observable v changes sign
+        (static): the drag's |v|·v. The event mode then ends a piece at every apex and
+        deepest point, so that each piece is smooth."""
+        return self.drag is not None
+
+    def observable(self, y: Array) -> Array:
+        """The quantity whose roots are apexes (in flight) and deepest points (in contact): v."""
+        return y[1]
+
+    def flight_state(self, y: Array, tau: Array, direction: Array) -> Array:
+        """The state after `tau` s of free flight from `y`, in closed form (see
+        `jaxunilat._models._flight`), in a piece where v has the sign `direction` (±1; a rising
+        piece ends at its apex). Used by the event mode's `flight="closed"`."""
+        x, v = flight_state(y[0], y[1], tau, self.gravity, self.drag, direction > 0)
+        return jnp.stack([x, v])
+
+    def flight_events(self, y: Array, direction: Array) -> tuple[Array, Array, Array]:
+        """From `y` in free flight (v of sign `direction`): the time to the apex, the
+        time to each wall (lower first; inf where it is not reached in this piece) and
+        the longest piece, s. A rising ball can only meet the upper wall, a falling one
+        only the lower wall."""
+        x, v = y[0], y[1]
+        rising = direction > 0
+        inf = jnp.full_like(x, jnp.inf)
+        apex = jnp.where(rising, apex_time(v, self.gravity, self.drag), inf)
+        walls = []
+        if self.lower is not None:
+            depth = jnp.maximum(x - self.lower, 0.0)
+            walls.append(jnp.where(rising, inf, fall_time(-v, depth, self.gravity, self.drag)))
+        if self.upper is not None:
+            # An apex within rounding of the wall is a graze, not a contact: a penetration
+            # below the resolution of x could not be located (nor could its exit).
+            rise = apex_rise(v, self.gravity, self.drag)
+            margin = (
+                _GRAZE_ULPS
+                * jnp.finfo(x.dtype).eps
+                * jnp.maximum(jnp.abs(self.upper), jnp.abs(x) + jnp.where(rise < jnp.inf, rise, 0.0))
+            )
+            walls.append(
+                jnp.where(rising, rise_time(v, self.upper - x, self.gravity, self.drag, margin), inf)
+            )
+        longest = jnp.where(rising, inf, longest_fall(self.gravity, self.drag))
+        return apex, jnp.stack(walls), longest
+
+    # -- the event mode's view of a ball at rest on the lower wall -----------------
+
+    def _lower_only(self, mask):
+        """Whether `mask` is a contact with the lower wall alone (static False without one)."""
+        if self.lower is None:
+            return jnp.zeros((), bool)
+        return mask[0] if self.upper is None else mask[0] & ~mask[1]
+
+    def rest_error(self, y: Array, mask: Array, horizon: Array) -> Array:
+        """Whether the contact in `mask` can never end, and how well `rest_state` follows it.
+
+        Gravity presses the ball into the lower wall, and inside the contact the energy
+        about the static deflection never increases, so below the exit threshold the
+        contact provably never ends (see `jaxunilat._models._rest`). An upper wall under gravity
+        pushes the ball away and no wall holds a ball without gravity.
+
+        **Returns:** +inf where the contact can still end (flight, the upper wall, an
+        energy above the threshold); otherwise a bound, m, on the distance between the
+        true motion and `rest_state` over the next `horizon` s, as the amplitude
+        √(Δx² + Δv²/ω²) (ω the contact's angular frequency): 0 for Kelvin–Voigt without
+        drag (its closed form is exact), c·A²·min(ωT, 1/(4ζ)) with drag (c = k²g, A the
+        amplitude about the static deflection, T = `horizon`), never more than 2A (and
+        2A for the clamped law while its clamp may act), and for Hunt–Crossley the
+        largest distance from the rest state that the energy allows. Other laws: +inf.
+        """
+        x, v = y[0], y[1]
+        inf = jnp.full_like(x, jnp.inf)
+        if self.lower is None:
+            return inf
+        pen = self.lower - x
+        if isinstance(self.law, HuntCrossley):
+            err = _rest.hunt_crossley_rest_error(
+                pen, v, self.kappa, self.mass, self.gravity, self.law.exponent
+            )
+        elif isinstance(self.law, (KelvinVoigt, ClampedKelvinVoigt)):
+            err = _rest.kelvin_voigt_rest_error(
+                pen,
+                v,
+                horizon,
+                self.kappa,
+                self.k_r,
+                self.mass,
+                self.gravity,
+                self.drag,
+                isinstance(self.law, ClampedKelvinVoigt),
+            )
+        else:
+            return inf
+        return jnp.where(self._lower_only(mask), err, inf)
+
+    def rest_state(self, y: Array, tau: Array) -> Array:
+        """The state `tau` s after `y` in a contact with the lower wall that never ends
+        (`rest_error` finite), within `rest_error`'s bound of the true motion: for
+        Kelvin–Voigt and the clamped law the damped oscillator about x = wall − mg/κ in
+        closed form; for Hunt–Crossley the rest state x = wall − (mg/κ)^(1/n), v = 0."""
+        x, v = y[0], y[1]
+        if self.lower is None:
+            return y  # never used: without a lower wall `rest_error` is +inf
+        if isinstance(self.law, HuntCrossley):
+            # (g = 0 never rests: a safe g keeps the unused power's derivative finite.)
+            g = jnp.where(self.gravity > 0, self.gravity, 1.0)
+            star = _rest.hunt_crossley_deflection(self.kappa, self.mass, g, self.law.exponent)
+            return jnp.stack([self.lower - star + jnp.zeros_like(x), jnp.zeros_like(v)])
+        u, vv = _rest.kelvin_voigt_rest_state(
+            self.lower - x, v, tau, self.kappa, self.k_r, self.mass, self.gravity
+        )
+        return jnp.stack([self.lower + u, vv])
+
+    def energy(self, x: Array, v: Array) -> Array:
+        """Kinetic + gravitational (zero at x = 0) + stored contact energy, J."""
+        e = 0.5 * self.mass * v**2 + self.mass * self.gravity * x
+        for pen, _, _ in self._wall_terms(x, v):
+            e = e + self.law.potential(pen, self.kappa)
+        return e
+
+    def penetration(self, x: Array) -> Array:
+        """Depth into the nearest wall, m (0 in free flight)."""
+        pen = jnp.zeros_like(x)
+        for p, _, _ in self._wall_terms(x, jnp.zeros_like(x)):
+            pen = jnp.maximum(pen, p)
+        return pen
+
+    def in_contact(self, x: Array) -> Array:
+        """1.0 while x is beyond a wall (exact test, whatever the Heaviside option)."""
+        on = jnp.zeros_like(x, dtype=bool)
+        if self.lower is not None:
+            on = on | (x < self.lower)
+        if self.upper is not None:
+            on = on | (x > self.upper)
+        return on.astype(x.dtype)
+
+    def output(self, name, t, y):
+        x, v = y[0], y[1]
+        if name == "x":
+            return x
+        if name == "v":
+            return v
+        if name == "force":
+            return self.contact_force(x, v)
+        if name == "penetration":
+            return self.penetration(x)
+        if name == "energy":
+            return self.energy(x, v)
+        if name == "contact":
+            return self.in_contact(x)
+        raise ValueError(f"output = {name!r} is not supported; choose from {self.output_names}")
+
+    def paper_initial_state(self) -> Array:
+        """The paper's initial state [K90 §5.1]: x(0) = lower wall (−a), v(0) = −1/k.
+
+        The ball touches the lower racket moving down at the terminal speed
+        1/k = 1/0.122 ≈ 8.197 m/s (the paper's k, whether or not drag is on).
+        """
+        x0 = self.lower if self.lower is not None else jnp.asarray(-PAPER_GAP / 2)
+        return jnp.stack([x0, jnp.asarray(-1.0 / PAPER_DRAG)])
+
+
+def ball_state(x0: ArrayLike, v0: ArrayLike) -> Array:
+    """Pack an initial state y0 = (x0 [m], v0 [m/s])."""
+    return jnp.stack([float_field("x0", "m")(x0), float_field("v0", "m/s")(v0)])

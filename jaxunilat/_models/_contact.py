@@ -1,0 +1,277 @@
+"""Clearance force [K90 Eq. 2.1–2.4] and contact laws.
+
+A contact law turns a penetration δ ≥ 0 (m), its rate δ̇ (m/s, positive while
+penetrating deeper) and the switch H (1 in contact) into the repulsive force F (N)
+that pushes the body out of the wall. The law's choice is static; κ and k_r are
+traced parameters that the model passes in.
+
+Closed forms for the paper's law (a linear spring plus a damper switched on in
+contact, the Kelvin–Voigt model), for a body of mass m hitting a wall without
+gravity [K90 §5.1]:
+
+    ω_n = √(κ/m),   ζ = k_r / (2√(κ m)),   ω_d = ω_n √(1 − ζ²)
+    t_c = π / ω_d                               (contact time, s)
+    e   = exp(−π ζ / √(1 − ζ²))                 (restitution, |v_out / v_in|)
+
+and the inverse map (e, t_c) → (κ, k_r):
+
+    κ   = m (π² + ln² e) / t_c²
+    k_r = −2 m ln e / t_c
+"""
+
+from __future__ import annotations
+
+import abc
+import math
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike
+
+from ..internal._validate import check_range, real_number
+from ._heaviside import AbstractHeaviside, Exact
+
+
+class AbstractContactLaw(eqx.Module):
+    """A penalty contact law F(δ, δ̇) for one wall.
+
+    Subclasses implement `force` and `potential`. All laws reduce to the same
+    spring κδ when damping is off.
+    """
+
+    @abc.abstractmethod
+    def force(self, pen: Array, pen_rate: Array, on: Array, kappa: Array, k_r: Array | None) -> Array:
+        """The repulsive contact force, N.
+
+        **Arguments:**
+
+        - `pen`: penetration δ ≥ 0, m (the Heaviside option's ramp).
+        - `pen_rate`: δ̇, m/s, positive while moving deeper into the wall.
+        - `on`: the Heaviside switch H ∈ [0, 1].
+        - `kappa`: contact stiffness κ (N/m for the linear laws).
+        - `k_r`: contact damping, or `None` for no damping (absent from the graph).
+        """
+
+    @abc.abstractmethod
+    def potential(self, pen: Array, kappa: Array) -> Array:
+        """The elastic energy stored in the contact, J."""
+
+
+class KelvinVoigt(AbstractContactLaw):
+    """The paper's law: F = κδ + k_r δ̇ H [K90 Eq. 2.4, 3.2]. The default.
+
+    κ in N/m (the paper's kg/s²), k_r in N·s/m (kg/s).
+
+    Restitution and contact time (no gravity): see `restitution` and `contact_time`
+    in this module; the inverse map (e, t_c) → (κ, k_r) is `parameters_from_restitution`.
+
+    Known pathologies: the force jumps by k_r·v_in at touchdown, and it
+    pulls (is adhesive) just before separation, down to about −1.5 N in example 2.
+    """
+
+    def force(self, pen, pen_rate, on, kappa, k_r):
+        f = kappa * pen
+        if k_r is not None:
+            f = f + k_r * pen_rate * on
+        return f
+
+    def potential(self, pen, kappa):
+        return 0.5 * kappa * pen**2
+
+
+class ClampedKelvinVoigt(AbstractContactLaw):
+    """A spring–damper whose damping force is bounded by the spring force.
+
+    F = κδ + clip(k_r δ̇ H, −κδ, κδ), as in the Modelica `ElastoGap`. The force is
+    continuous at touchdown (it starts at zero) and never adhesive (F ≥ 0).
+
+    Restitution and contact time: no closed form. For light damping (ζ ≲ 0.1) they
+    approach the Kelvin–Voigt values of `restitution` and `contact_time`; the
+    clamp makes the contact dissipate less than Kelvin–Voigt with the same k_r,
+    so e is larger. Compute them numerically with `simulate`.
+    """
+
+    def force(self, pen, pen_rate, on, kappa, k_r):
+        spring = kappa * pen
+        if k_r is None:
+            return spring
+        return spring + jnp.clip(k_r * pen_rate * on, -spring, spring)
+
+    def potential(self, pen, kappa):
+        return 0.5 * kappa * pen**2
+
+
+class HuntCrossley(AbstractContactLaw):
+    """Hunt–Crossley: F = κδⁿ(1 + χδ̇) with χ = k_r/κ, i.e. F = κδⁿ + k_r δⁿ δ̇.
+
+    **Arguments:**
+
+    - `exponent`: n > 0 (static). n = 3/2 is Hertz's sphere-on-plane contact.
+
+    Units: κ in N/mⁿ, k_r in N·s/mⁿ⁺¹ (so χ = k_r/κ is in s/m).
+
+    Relations (Hunt & Crossley 1975; Marhefka & Orin 1999), for impact speed v:
+
+    - Restitution depends on speed: e ≈ 1 − (2/3)·χ·v for small χv
+      (χ ≈ 3(1 − e)/(2v)).
+    - Undamped maximum penetration δ_max = ((n + 1) m v² / (2κ))^(1/(n+1)).
+    - Undamped contact time t_c = 2 (δ_max / v) · √π Γ(1 + 1/(n+1)) / Γ(1/2 + 1/(n+1));
+      for n = 3/2 this is t_c ≈ 2.9432 δ_max / v.
+
+    The force vanishes continuously at touchdown, but it is adhesive when
+    δ̇ < −1/χ (very fast separation); the law is not clamped.
+    """
+
+    exponent: float = eqx.field(static=True, default=1.5)
+
+    def __check_init__(self):
+        check_range("exponent", self.exponent, lo=0.0, lo_open=True)
+
+    def _power(self, pen):
+        # Double-where: the power's gradient is finite at δ = 0 even for n < 1.
+        inside = pen > 0
+        safe = jnp.where(inside, pen, jnp.ones_like(pen))
+        return jnp.where(inside, safe**self.exponent, jnp.zeros_like(pen))
+
+    def force(self, pen, pen_rate, on, kappa, k_r):
+        p = self._power(pen)
+        f = kappa * p
+        if k_r is not None:
+            f = f + k_r * p * pen_rate
+        return f
+
+    def potential(self, pen, kappa):
+        inside = pen > 0
+        safe = jnp.where(inside, pen, jnp.ones_like(pen))
+        n1 = self.exponent + 1.0
+        return jnp.where(inside, kappa * safe**n1 / n1, jnp.zeros_like(pen))
+
+
+def _real(**values) -> tuple[Array, ...]:
+    """The values as JAX arrays, after `real_number` checks that name each one."""
+    return tuple(jnp.asarray(real_number(name, value)) for name, value in values.items())
+
+
+def damping_ratio(kappa: ArrayLike, k_r: ArrayLike, mass: ArrayLike) -> Array:
+    """ζ = k_r / (2√(κ m)), dimensionless. κ in N/m, k_r in N·s/m, m in kg."""
+    kappa, k_r, mass = _real(kappa=kappa, k_r=k_r, mass=mass)
+    return k_r / (2.0 * jnp.sqrt(kappa * mass))
+
+
+def restitution(kappa: ArrayLike, k_r: ArrayLike, mass: ArrayLike) -> Array:
+    """Kelvin–Voigt restitution e = exp(−πζ/√(1 − ζ²)) for ζ < 1, else 0.
+
+    **Arguments:** `kappa` (N/m), `k_r` (N·s/m), `mass` (kg).
+
+    **Returns:** e ∈ [0, 1], the ratio |v_out/v_in| for an impact without gravity.
+    """
+    zeta = damping_ratio(kappa, k_r, mass)
+    under = zeta < 1
+    safe = jnp.where(under, zeta, 0.5)
+    return jnp.where(under, jnp.exp(-jnp.pi * safe / jnp.sqrt(1 - safe**2)), 0.0)
+
+
+def contact_time(kappa: ArrayLike, k_r: ArrayLike, mass: ArrayLike) -> Array:
+    """Kelvin–Voigt contact time t_c = π/ω_d, s, for ζ < 1 (inf otherwise).
+
+    **Arguments:** `kappa` (N/m), `k_r` (N·s/m), `mass` (kg).
+    """
+    return rk4_step_limit(*_real(kappa=kappa, k_r=k_r, mass=mass))[1]
+
+
+#: `simulate(solver="rk4")` takes at least this many steps per Kelvin–Voigt contact time.
+RK4_STEPS_PER_CONTACT = 10
+
+
+def rk4_step_limit(kappa, k_r, mass, xp=jnp):
+    """The largest RK4 step `simulate` accepts for a Kelvin–Voigt contact, s, and t_c, s.
+
+    The limit is min(t_c/10, 1/|λ|max): a tenth of the contact time t_c = π/ω_d
+    (`contact_time`; coarser steps miss or misplace contacts, and from about
+    t_c/1.1 RK4 diverges), or, for an overdamped contact (ζ ≥ 1, t_c = inf), the
+    time scale 1/|λ|max of its fastest mode, λ = −ω_n(ζ ± √(ζ² − 1)). Below
+    ζ ≈ 0.95 the first term is the smaller.
+
+    **Arguments:** `kappa` (N/m), `k_r` (N·s/m, or `None`: no damping), `mass` (kg);
+    `xp`: the array namespace (`jax.numpy`, or `numpy` for concrete values).
+
+    **Returns:** `(limit, t_c)` in s (NaN for non-physical parameters).
+    """
+    omega_n = xp.sqrt(kappa / mass)
+    zeta = 0.0 * omega_n if k_r is None else k_r / (2.0 * xp.sqrt(kappa * mass))
+    under = zeta < 1
+    t_c = xp.where(under, xp.pi / (omega_n * xp.sqrt(xp.where(under, 1.0 - zeta**2, 1.0))), xp.inf)
+    fastest = omega_n * xp.where(under, 1.0, zeta + xp.sqrt(xp.where(under, 0.0, zeta**2 - 1.0)))
+    return xp.minimum(t_c / RK4_STEPS_PER_CONTACT, 1.0 / fastest), t_c
+
+
+def parameters_from_restitution(e: ArrayLike, t_c: ArrayLike, mass: ArrayLike) -> tuple[Array, Array]:
+    """The inverse Kelvin–Voigt map (e, t_c) → (κ, k_r).
+
+    **Arguments:**
+
+    - `e`: restitution in (0, 1].
+    - `t_c`: contact time, s, > 0.
+    - `mass`: kg, > 0.
+
+    **Returns:** `(kappa, k_r)` in N/m and N·s/m, with κ = m(π² + ln²e)/t_c² and
+    k_r = −2 m ln e / t_c.
+    """
+    check_range("e", e, lo=0.0, hi=1.0, lo_open=True)
+    check_range("t_c", t_c, lo=0.0, lo_open=True, unit="s")
+    check_range("mass", mass, lo=0.0, lo_open=True, unit="kg")
+    e, t_c, mass = jnp.asarray(e), jnp.asarray(t_c), jnp.asarray(mass)
+    le = jnp.log(e)
+    return mass * (jnp.pi**2 + le**2) / t_c**2, -2.0 * mass * le / t_c
+
+
+def hunt_crossley_contact_time(kappa: float, mass: float, speed: float, exponent: float = 1.5) -> float:
+    """Undamped Hunt–Crossley (Hertz for n = 3/2) contact time, s.
+
+    t_c = 2 (δ_max / v) √π Γ(1 + 1/(n+1)) / Γ(1/2 + 1/(n+1)),
+    δ_max = ((n + 1) m v² / (2κ))^(1/(n+1)).
+    """
+    n1 = exponent + 1.0
+    dmax = (n1 * mass * speed**2 / (2.0 * kappa)) ** (1.0 / n1)
+    integral = math.sqrt(math.pi) * math.gamma(1.0 + 1.0 / n1) / math.gamma(0.5 + 1.0 / n1)
+    return 2.0 * dmax / speed * integral
+
+
+def clearance_force(
+    x: ArrayLike,
+    a: ArrayLike | None,
+    b: ArrayLike | None,
+    kappa1: ArrayLike,
+    kappa2: ArrayLike,
+    heaviside: AbstractHeaviside = Exact(),
+) -> Array:
+    """The general clearance force P(x) = κ₁(x − a)H(a − x) + κ₂(x − b)H(x − b) [K90 Eq. 2.1].
+
+    **Arguments:**
+
+    - `x`: the coordinate, m.
+    - `a`, `b`: the clearance interval (a, b), m; either may be `None` (that wall is
+      absent, a one-sided stop).
+    - `kappa1`, `kappa2`: coefficients, N/m, with the paper's sign convention: the
+      restoring case is κ₁ = κ₂ = −κ [K90 Eq. 2.3].
+    - `heaviside`: the Heaviside option.
+
+    **Returns:** P in N.
+    """
+    x = jnp.asarray(x)
+    p = jnp.zeros_like(x, dtype=jnp.result_type(x, float))
+    if a is not None:
+        p = p - jnp.asarray(kappa1) * heaviside.ramp(a - x)
+    if b is not None:
+        p = p + jnp.asarray(kappa2) * heaviside.ramp(x - b)
+    return p
+
+
+def symmetric_clearance_force(
+    x: ArrayLike, a: ArrayLike, kappa: ArrayLike, heaviside: AbstractHeaviside = Exact()
+) -> Array:
+    """P(x) = −κ[(x − a)H(x − a) + (x + a)H(−x − a)] [K90 Eq. 2.4], N.
+
+    The origin is mid-clearance and `a` is the half-width, m.
+    """
+    return clearance_force(x, -jnp.asarray(a), a, -jnp.asarray(kappa), -jnp.asarray(kappa), heaviside)

@@ -1,0 +1,487 @@
+"""`simulate`: the package's one jitted entry point."""
+
+from __future__ import annotations
+
+import enum
+import math
+import re
+from collections import Counter
+
+import diffrax as dfx
+import equinox as eqx
+import equinox.internal as eqxi
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike
+
+from .._models._contact import RK4_STEPS_PER_CONTACT
+from .._models._heaviside import Exact
+from .._models._model import AbstractModel
+from ..internal._validate import (
+    InputTypeError,
+    as_float_array,
+    check_choice,
+    check_range,
+    is_concrete,
+    real_number,
+    runtime_check,
+)
+from ._device_cache import DeviceCache
+from ._event import _EV as _EVENT_COLUMNS, EventRecord, event_solve
+from ._settings import SolverSettings, failure_hints, make_settings
+
+#: The most memory `simulate` lets one run's save times and outputs (or the event
+#: mode's event buffer) take, bytes: beyond it, a ValueError names `samples` or
+#: `max_events` before anything is allocated.
+MAX_OUTPUT_BYTES = 4 * 2**30
+#: How many times each jitted function was traced (compiled). Tests and the
+#: benchmark read it to prove that new parameter values do not retrace.
+_TRACES: Counter = Counter()
+
+
+def trace_counts() -> dict[str, int]:
+    """How many times each jitted entry point has been traced in this process."""
+    return dict(_TRACES)
+
+
+class Status(enum.IntEnum):
+    """Outcome of a run, stored as `Solution.status`."""
+
+    SUCCESS = 0
+    MAX_STEPS = 1
+    NONFINITE = 2
+    SOLVER_FAILED = 3
+    EVENT_OVERFLOW = 4
+    #: A traced input out of its valid range (concrete ones raise `ValueError` before
+    #: the solve): the outputs are meaningless. With `throw=True` the error names it.
+    INVALID_INPUT = 5
+
+
+def _messages(settings: SolverSettings) -> list[str]:
+    hints = failure_hints(
+        settings.method,
+        piece_solver=settings.piece_solver,
+        flight=settings.flight,
+        dtmax=settings.dtmax is not None,
+    )
+    return [
+        f"jaxunilat.simulate: the solver used all max_steps = {settings.max_steps} steps "
+        f"before t1 ({settings.method}); {hints['max_steps']}.",
+        f"jaxunilat.simulate: the solution became non-finite (NaN or inf); {hints['nonfinite']}.",
+        f"jaxunilat.simulate: the {settings.method} solver failed (diffrax reported an error "
+        "other than max_steps); pass throw=False to inspect the partial result.",
+        f"jaxunilat.simulate: more than max_events = {settings.max_events} events (entries, exits, "
+        f"apexes, deepest points); {hints['max_events']}.",
+    ]
+
+
+class Solution(eqx.Module):
+    """The result of `simulate`.
+
+    **Fields:**
+
+    - `ts`: the save times, s.
+    - `ys`: a dict of the requested outputs, each an array over `ts`
+      (x in m, v in m/s, force in N, penetration in m, energy in J, contact in {0, 1}).
+    - `y1`: the state at t1.
+    - `status`: a `Status` code (0 = success).
+    - `num_steps`, `num_accepted_steps`, `num_rejected_steps`: solver statistics.
+    - `events`: the event mode's `EventRecord` (contact entries and exits, apexes,
+      deepest points); `None` for the other solvers.
+    """
+
+    ts: Array
+    ys: dict[str, Array]
+    y1: Array
+    status: Array
+    num_steps: Array
+    num_accepted_steps: Array
+    num_rejected_steps: Array
+    events: EventRecord | None = None
+
+    def __getitem__(self, name: str) -> Array:
+        return self.ys[name]
+
+    @property
+    def ok(self) -> bool:
+        """True when every run in the (possibly batched) result succeeded."""
+        return bool(np.all(np.asarray(self.status) == Status.SUCCESS))
+
+    @property
+    def message(self) -> str:
+        """A human-readable description of the status (concrete results only)."""
+        codes = sorted({int(c) for c in np.asarray(self.status).ravel()})
+        return "; ".join(Status(c).name.lower() for c in codes)
+
+
+_FORWARD_ONLY = (
+    "jaxunilat.simulate: autodiff='forward' differentiates in forward mode only (jax.jvp, "
+    "jax.jacfwd); for jax.grad, jax.vjp or jax.jacrev pass autodiff='reverse' (the default)."
+)
+
+
+def _input_checks(model, y0, t0, t1, ts, settings: SolverSettings) -> list[tuple[str, Array]]:
+    """(message, valid) per run-time check of a solve's inputs, in the order they are
+    reported: what `simulate` and the model check on concrete values before compiling,
+    for traced ones (under `jax.jit`, `jax.vmap`, `jax.grad`). Each `valid` is a scalar
+    bool (per row under `jax.vmap`); all are evaluated once, before the solve."""
+    checks = list(model.runtime_checks())
+    checks.append(runtime_check("t0", t0, unit="s"))
+    checks.append(runtime_check("t1 - t0", t1 - t0, lo=0.0, lo_open=True, unit="s"))
+    checks.append(runtime_check("y0", y0))
+    checks.append(
+        (
+            "jaxunilat.simulate: ts must be sorted within [t0, t1] (traced values).",
+            jnp.all(jnp.diff(ts) >= 0) & (ts[0] >= t0) & (ts[-1] <= t1),
+        )
+    )
+    checks.append(runtime_check("rtol", settings.rtol, lo=0.0, hi=1.0, lo_open=True))
+    checks.append(runtime_check("atol", settings.atol, lo=0.0, lo_open=True))
+    for name, value in (("dt", settings.dt), ("dtmax", settings.dtmax)):
+        if value is not None:
+            checks.append(runtime_check(name, value, lo=0.0, lo_open=True, unit="s"))
+    if settings.method == "rk4" and not settings.allow_coarse_dt:
+        limit = model.rk4_step_limit(jnp)
+        if limit is not None:
+            checks.append(
+                (
+                    "jaxunilat.simulate: dt is beyond rk4's stability limit for this contact, a tenth "
+                    "of the contact time t_c = pi/omega_d (the traced dt or parameters); decrease dt, "
+                    "or use solver='tsit5' or solver='event' (or pass allow_coarse_dt=True).",
+                    jnp.all(settings.dt <= limit[0]),
+                )
+            )
+    return checks
+
+
+def _finish(ys, y1, status, settings, throw, ts, stats, events=None, checks=()):
+    messages = _messages(settings)
+    reason = jnp.maximum(status - 1, 0)
+    if checks:
+        valid = jnp.stack([ok for _, ok in checks])
+        # The first failed check, reported instead of whatever the solve did with it.
+        reason = jnp.where(jnp.all(valid), reason, len(messages) + jnp.argmin(valid))
+        status = jnp.where(jnp.all(valid), status, Status.INVALID_INPUT).astype(jnp.int32)
+        messages = messages + [message for message, _ in checks]
+    if throw:
+        ys = eqx.branched_error_if(ys, status != Status.SUCCESS, reason, messages)
+    if settings.autodiff == "forward":
+        # A clear error instead of JAX's about transposing a while loop.
+        ys, y1, events = eqxi.nondifferentiable_backward((ys, y1, events), msg=_FORWARD_ONLY)
+    return Solution(
+        ts=ts,
+        ys=ys,
+        y1=y1,
+        status=status,
+        num_steps=stats["num_steps"],
+        num_accepted_steps=stats["num_accepted_steps"],
+        num_rejected_steps=stats["num_rejected_steps"],
+        events=events,
+    )
+
+
+def _solve_impl(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[str, ...], throw: bool):
+    _TRACES["simulate"] += 1
+    checks = _input_checks(model, y0, t0, t1, ts, settings)
+    if settings.method == "event":
+        ys, y1, done, nonfinite, overflow, stats, events = event_solve(
+            model, y0, t0, t1, ts, settings, outputs
+        )
+        finite = jnp.all(jnp.isfinite(y1))
+        status = jnp.where(
+            nonfinite | ~finite,
+            Status.NONFINITE,
+            jnp.where(overflow, Status.EVENT_OVERFLOW, jnp.where(done, Status.SUCCESS, Status.MAX_STEPS)),
+        ).astype(jnp.int32)
+        return _finish(ys, y1, status, settings, throw, ts, stats, events, checks)
+
+    def save_fn(t, y, args):
+        return {name: args.output(name, t, y) for name in outputs}
+
+    saveat = dfx.SaveAt(subs=[dfx.SubSaveAt(ts=ts, fn=save_fn), dfx.SubSaveAt(t1=True)])
+    sol = dfx.diffeqsolve(
+        dfx.ODETerm(lambda t, y, args: args.vector_field(t, y)),
+        settings.diffrax_solver(),
+        t0,
+        t1,
+        settings.dt,
+        y0,
+        args=model,
+        saveat=saveat,
+        stepsize_controller=settings.controller(),
+        adjoint=settings.adjoint(),
+        max_steps=settings.max_steps,
+        throw=False,
+    )
+    ys, y1 = sol.ys[0], sol.ys[1][0]
+    finite = jnp.all(jnp.isfinite(y1))
+    for value in ys.values():
+        finite = finite & jnp.all(jnp.isfinite(value))
+    ok = sol.result == dfx.RESULTS.successful
+    steps = sol.result == dfx.RESULTS.max_steps_reached
+    status = jnp.where(
+        ok,
+        jnp.where(finite, Status.SUCCESS, Status.NONFINITE),
+        jnp.where(steps, Status.MAX_STEPS, jnp.where(finite, Status.SOLVER_FAILED, Status.NONFINITE)),
+    ).astype(jnp.int32)
+    return _finish(ys, y1, status, settings, throw, ts, sol.stats, checks=checks)
+
+
+#: The compiled solve. Plain `jax.jit` (every leaf of a model or of the settings is an
+#: array; structure is in their static fields): its C++ dispatch costs ~80 µs less per
+#: call than `equinox.filter_jit`, a fifth of a short event-mode call.
+_solve = jax.jit(_solve_impl, static_argnames=("outputs", "throw"))
+
+
+def _run(model, y0, t0, t1, ts, settings, outputs, throw):
+    """Call `_solve`; with `throw`, wait for the result and turn a solver failure into
+    an `equinox.EquinoxRuntimeError` that carries only our message (JAX's own error
+    wraps it in a host callback's traceback)."""
+    try:
+        sol = _solve(model, y0, t0, t1, ts, settings, outputs, throw)
+        if throw and not isinstance(sol.status, jax.core.Tracer):
+            sol.status.block_until_ready()
+    except jax.errors.JaxRuntimeError as err:
+        found = re.search(r"_EquinoxRuntimeError: (.+)", str(err))
+        if found is None:
+            raise
+        raise eqx.EquinoxRuntimeError(found.group(1).strip()) from None
+    return sol
+
+
+#: Default save times on the device, by (t0, t1, samples): building them with NumPy and
+#: copying them to the device costs ~50 µs per call.
+_TIMES = DeviceCache(64)
+
+
+def _default_times(t0, t1, samples: int):
+    """(t0, t1, `samples` uniform save times over [t0, t1]) as device arrays."""
+    if not (is_concrete(t0) and is_concrete(t1)):
+        return t0, t1, jnp.linspace(t0, t1, samples)
+    key = (float(t0), float(t1), samples)
+    return _TIMES.get(key, lambda: (t0, t1, np.linspace(key[0], key[1], samples)))
+
+
+def _time_span(t_span):
+    if isinstance(t_span, (tuple, list)):
+        if len(t_span) != 2:
+            raise ValueError(f"t_span = {t_span!r} must be t1 or a pair (t0, t1), in s")
+        t0, t1 = t_span
+    else:
+        t0, t1 = 0.0, t_span
+    check_range("t0", t0, unit="s")
+    check_range("t1", t1, unit="s")
+    if is_concrete(t0) and is_concrete(t1) and not float(t1) > float(t0):
+        raise ValueError(f"t1 = {float(t1):g} s is out of range; valid range is t1 > t0 = {float(t0):g} s")
+    return as_float_array(t0), as_float_array(t1)
+
+
+def simulate(
+    model: AbstractModel,
+    y0: ArrayLike,
+    t_span,
+    *,
+    solver: str = "tsit5",
+    dt: ArrayLike | None = None,
+    allow_coarse_dt: bool = False,
+    rtol: ArrayLike = 1e-8,
+    atol: ArrayLike = 1e-8,
+    max_steps: int | None = None,
+    max_events: int = 2048,
+    dtmax: ArrayLike | None = None,
+    piece_solver: str = "tsit5",
+    flight: str = "closed",
+    autodiff: str = "reverse",
+    ts: ArrayLike | None = None,
+    samples: int = 1001,
+    outputs: tuple[str, ...] = ("x", "v"),
+    throw: bool = True,
+) -> Solution:
+    """Integrate a model from y0 over a time span and save the requested outputs.
+
+    **Arguments:**
+
+    - `model`: a model such as `Ball.table1(2)`: parameters (traced) and structure (static).
+    - `y0`: the initial state, e.g. (x0 [m], v0 [m/s]) for the ball.
+    - `t_span`: t1, or a pair (t0, t1), in s.
+    - `solver`: `"rk4"` (the paper's fixed-step method, needs `dt`), `"tsit5"`
+      (adaptive, PID step control with `rtol`, `atol`) or `"event"` (the exact
+      model with every contact entry and exit located, integrated piecewise with
+      Tsit5 at `rtol`, `atol`; correct gradients through impacts; needs
+      `heaviside=Exact()`).
+    - `dt`: the RK4 step, s (for the adaptive methods: an optional first step). RK4
+      refuses a step above the model's limit, a tenth of the contact time
+      (`model.rk4_step_limit()`): coarser steps lose or misplace contacts, and diverge.
+    - `allow_coarse_dt`: RK4 only: run such a step anyway, e.g. to reproduce the
+      paper's dt = 1 ms with its lost contacts.
+    - `rtol`, `atol`: the adaptive methods' tolerances.
+    - `max_steps`: the step budget (see `SolverSettings`).
+    - `max_events`: the event mode's event buffer size.
+    - `dtmax`: the event mode's largest step, s.
+    - `piece_solver`: the event mode's Runge–Kutta pair, `"tsit5"` or `"dopri8"`.
+    - `flight`: the event mode's free flight: `"closed"` (default: the model's closed
+      form where it has one, e.g. the ball's tan/tanh solution with quadratic drag;
+      one loop iteration from a wall to the apex and one back) or `"integrated"`
+      (Runge–Kutta steps, as in contact).
+    - `autodiff`: `"reverse"` (default: `jax.grad`, `jax.vjp`, `jax.jacrev`; the loop
+      is checkpointed at every step) or `"forward"` (`jax.jvp`, `jax.jacfwd`; a plain
+      loop, where reverse mode raises). For a few parameters forward mode is cheaper:
+      `jax.jacfwd` of an event-mode loss in (κ, k_r) costs about 2 forward solves
+      against 15–25 for `jax.grad`, and compiles in half the time (README, Performance).
+    - `ts`: save times, s, sorted within [t0, t1]. Default: `samples` uniform
+      times over [t0, t1], both ends included.
+    - `outputs`: which outputs to save, from `model.output_names`
+      (ball: x, v, force, penetration, energy, contact). Only these are stored.
+    - `throw`: raise on failure (max_steps exhausted, non-finite values) with a
+      message that says what to change. With `throw=False` the result's
+      `status` says what happened instead.
+
+    **Returns:** a `Solution`.
+
+    Changing only parameter values (model leaves, y0, t_span, ts, dt, rtol, atol)
+    does not retrace. Batch with `jax.vmap`, differentiate with `jax.grad` (or
+    `jax.jacfwd` with `autodiff="forward"`); use the event mode, or a smooth Heaviside
+    option, for meaningful gradients of the penalty model. On a CPU, call
+    `jaxunilat.use_loop_kernels()` before the first computation: the solvers' step loops
+    then compile into single kernels (3–8× faster calls, README, Performance).
+    """
+    if not isinstance(model, AbstractModel):
+        raise ValueError(f"model = {model!r} is not a jaxunilat model (e.g. Ball.table1(2))")
+    if not jax.config.jax_enable_x64:
+        raise ValueError(
+            "precision = float32 is not supported (jax_enable_x64 is off); valid: float64. In float32 "
+            "the step at a contact's kink must shrink below the time resolution (1.2e-7*t, t + dt == t), "
+            "so Tsit5 stalls at the first contacts (t ~ 0.1 s), and penetrations below 1.2e-7*|x| are "
+            "lost; call jax.config.update('jax_enable_x64', True). float32 input arrays are fine: "
+            "simulate casts them to float64."
+        )
+    outputs = _check_outputs(model, outputs)
+    y0 = _check_y0(model, y0)
+    t0, t1 = _time_span(t_span)
+    span = t1 - t0  # before the save times put t0 and t1 on the device
+    t0, t1, ts = _save_times(t0, t1, ts, samples, len(outputs))
+    if solver == "event":
+        _check_event_mode(model, max_events)
+    settings = make_settings(
+        solver,
+        span,
+        dt=dt,
+        rtol=rtol,
+        atol=atol,
+        max_steps=max_steps,
+        max_events=max_events,
+        dtmax=dtmax,
+        piece_solver=piece_solver,
+        flight=flight,
+        autodiff=autodiff,
+        allow_coarse_dt=allow_coarse_dt,
+    )
+    if solver == "rk4" and not allow_coarse_dt:
+        _check_rk4_step(model, dt)
+    return _run(model, y0, t0, t1, ts, settings, outputs, bool(throw))
+
+
+def _check_outputs(model, outputs) -> tuple[str, ...]:
+    """`outputs` as a tuple of the model's output names (ValueError otherwise)."""
+    if isinstance(outputs, str):
+        raise InputTypeError(
+            f"outputs = {outputs!r} is a string; give a tuple of names from "
+            f"{', '.join(model.output_names)} (one name: outputs=({model.output_names[0]!r},))"
+        )
+    outputs = tuple(outputs)
+    if not outputs:
+        raise ValueError("outputs = () is empty; request at least one of " + ", ".join(model.output_names))
+    for name in outputs:
+        check_choice("output", name, model.output_names)
+    return outputs
+
+
+def _check_y0(model, y0) -> Array:
+    """The initial state as a float64 array of the model's state shape, checked finite
+    and (when concrete) physically possible (`model.check_initial_state`)."""
+    y0 = as_float_array(real_number("y0", y0))
+    if y0.shape != (len(model.state_names),):
+        raise ValueError(
+            f"y0 has shape {y0.shape}; expected ({len(model.state_names)},) for the state "
+            f"({', '.join(model.state_names)})"
+        )
+    check_range("y0", y0)
+    if is_concrete(y0):
+        model.check_initial_state(y0)
+    return y0
+
+
+def _save_times(t0, t1, ts, samples, num_outputs: int):
+    """(t0, t1, ts): the given save times `ts` (s) checked, or `samples` uniform ones over
+    [t0, t1], refused beyond `MAX_OUTPUT_BYTES` before anything is allocated."""
+    if ts is None:
+        if not isinstance(samples, (int, np.integer)) or samples < 2:
+            raise ValueError(f"samples = {samples!r} is out of range; valid range is integers >= 2")
+        most = MAX_OUTPUT_BYTES // (8 * (num_outputs + 1))
+        if samples > most:
+            raise ValueError(
+                f"samples = {samples!r} is out of range: the save times and {num_outputs} outputs would "
+                f"take {8 * samples * (num_outputs + 1) / 2**30:.3g} GiB; valid range is integers 2 to "
+                f"{most} (at most {MAX_OUTPUT_BYTES / 2**30:g} GiB)"
+            )
+        return _default_times(t0, t1, int(samples))
+    ts = as_float_array(real_number("ts", ts, unit="s"))
+    if ts.ndim != 1 or ts.shape[0] < 1:
+        raise ValueError(f"ts has shape {ts.shape}; expected a non-empty 1-D array of times in s")
+    if is_concrete(ts) and is_concrete(t0) and is_concrete(t1):
+        arr = np.asarray(ts)
+        if np.any(np.diff(arr) < 0) or arr[0] < float(t0) or arr[-1] > float(t1):
+            raise ValueError(f"ts must be sorted within [t0, t1] = [{float(t0):g}, {float(t1):g}] s")
+    return t0, t1, ts
+
+
+def _check_event_mode(model, max_events) -> None:
+    """Refuse a model the event mode cannot solve, and an event buffer beyond
+    `MAX_OUTPUT_BYTES`."""
+    heaviside = getattr(model, "heaviside", None)
+    if heaviside is not None and not isinstance(heaviside, Exact):
+        raise ValueError(
+            f"heaviside = {type(model.heaviside).__name__} is not supported with solver='event'; "
+            "the event mode solves the exact model: use heaviside=Exact()"
+        )
+    # On the class: on the instance, equinox wraps the method in a new bound-method
+    # Module, which costs more than the check itself (this runs on every call).
+    if not hasattr(type(model), "switches"):
+        raise ValueError(f"solver = 'event' is not supported for {type(model).__name__}")
+    if isinstance(max_events, (int, np.integer)):
+        per_event = 8 * (_EVENT_COLUMNS + len(model.state_names))
+        if max_events > MAX_OUTPUT_BYTES // per_event:
+            raise ValueError(
+                f"max_events = {max_events!r} is out of range: the event buffer would take "
+                f"{max_events * per_event / 2**30:.3g} GiB; valid range is integers 1 to "
+                f"{MAX_OUTPUT_BYTES // per_event} (at most {MAX_OUTPUT_BYTES / 2**30:g} GiB)"
+            )
+
+
+def _is_concrete_tree(tree) -> bool:
+    return all(is_concrete(leaf) for leaf in jax.tree_util.tree_leaves(tree))
+
+
+def _check_rk4_step(model, dt) -> None:
+    """Raise `ValueError` when a concrete RK4 step `dt` exceeds the model's limit
+    (traced values are checked at run time: `Status.INVALID_INPUT`)."""
+    if not (is_concrete(dt) and _is_concrete_tree(model)):
+        return
+    # On the host: NumPy copies of the leaves (no device dispatch per operation).
+    found = jax.tree_util.tree_map(np.asarray, model).rk4_step_limit(np)
+    if found is None:
+        return
+    limit, t_c = (float(v) for v in found)
+    step = float(np.max(np.asarray(dt)))
+    if not step > limit:
+        return
+    if math.isfinite(t_c) and limit == t_c / RK4_STEPS_PER_CONTACT:
+        why = f"a tenth of the contact time t_c = pi/omega_d = {t_c:.3g} s"
+    else:
+        why = "the time scale 1/|lambda| of the overdamped contact's fastest mode"
+    raise ValueError(
+        f"dt = {step:g} s is beyond rk4's stability limit for this contact; valid range is "
+        f"(0, {limit:.3g}] s ({why}); use dt <= {limit:.3g} s, or solver='tsit5' or solver='event' "
+        "(allow_coarse_dt=True runs it anyway, losing contacts)"
+    )

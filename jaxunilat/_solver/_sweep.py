@@ -1,0 +1,200 @@
+"""`sweep`: a `jax.vmap` over a batch, sharded across all visible devices.
+
+The batch axis is split over a one-axis device `Mesh` ("batch") with `NamedSharding`,
+and `shard_map` runs each device's rows on that device. The same code
+runs on one CPU, one GPU, several local devices (e.g. `XLA_FLAGS=
+--xla_force_host_platform_device_count=2`, one CPU device per core) and, after
+`jax.distributed.initialize()`, on the devices of several hosts.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+from ._simulate import _TRACES
+
+AXIS = "batch"
+
+#: (fn, in_axes, device ids) -> (the jitted sharded vmapped function, batched and
+#: replicated shardings); and (that key, argument types) -> its compiled executable.
+_CACHE: dict[tuple, tuple] = {}
+_EXECUTABLES: dict[tuple, Any] = {}
+
+
+def _normalize_axes(in_axes, n_args: int) -> tuple[int | None, ...]:
+    if isinstance(in_axes, (int, type(None))):
+        axes = (in_axes,) * n_args
+    else:
+        axes = tuple(in_axes)
+    if len(axes) != n_args:
+        raise ValueError(
+            f"in_axes = {in_axes!r} has {len(axes)} entries; expected one per argument ({n_args})"
+        )
+    for axis in axes:
+        if axis not in (0, None):
+            raise ValueError(f"in_axes entry {axis!r} is out of range; valid entries are 0 (batched) or None")
+    return axes
+
+
+def _program(fn: Callable, axes: tuple[int | None, ...], devices: tuple, batch_size: int | None):
+    """(jitted sharded function, batched sharding, replicated sharding), cached per call signature.
+
+    `shard_map` hands every device its own rows; each device runs `jax.vmap(fn)` over
+    them, or `lax.map` over chunks of `batch_size` vmapped rows.
+    """
+    key = (fn, axes, tuple(d.id for d in devices), batch_size)
+    if key not in _CACHE:
+        mesh = Mesh(np.asarray(devices), (AXIS,))
+        batched, replicated = NamedSharding(mesh, PartitionSpec(AXIS)), NamedSharding(mesh, PartitionSpec())
+
+        def local(*args):
+            if batch_size is None:
+                return jax.vmap(fn, in_axes=axes)(*args)
+            rows = tuple(a for a, axis in zip(args, axes, strict=True) if axis == 0)
+
+            def one(row):
+                it = iter(row)
+                return fn(*(next(it) if axis == 0 else a for a, axis in zip(args, axes, strict=True)))
+
+            # One row at a time: no vmap at all (a vmap of one row would still batch
+            # the loops' predicates).
+            return jax.lax.map(one, rows, batch_size=None if batch_size == 1 else batch_size)
+
+        def body(*args):
+            _TRACES["sweep"] += 1
+            specs = tuple(PartitionSpec(AXIS) if a == 0 else PartitionSpec() for a in axes)
+            # check_vma=False: the solvers stack per-row (device-varying) values with
+            # constants, which the varying-axes checker rejects; every row is independent.
+            return jax.shard_map(
+                local, mesh=mesh, in_specs=specs, out_specs=PartitionSpec(AXIS), check_vma=False
+            )(*args)
+
+        jitted = jax.jit(
+            body,
+            in_shardings=tuple(batched if a == 0 else replicated for a in axes),
+            out_shardings=batched,
+        )
+        _CACHE[key] = (jitted, batched, replicated)
+    return _CACHE[key]
+
+
+def _executable(fn, axes, devices, batch_size, placed):
+    """The compiled program for these placed arguments (cached per shapes and dtypes)."""
+    jitted = _program(fn, axes, devices, batch_size)[0]
+    leaves, treedef = jax.tree_util.tree_flatten(placed)
+    key = (fn, axes, tuple(d.id for d in devices), batch_size, treedef)
+    key += tuple(jax.typeof(leaf) for leaf in leaves)
+    if key not in _EXECUTABLES:
+        _EXECUTABLES[key] = jitted.lower(*placed).compile()
+    return _EXECUTABLES[key]
+
+
+def _batch_size(args, axes) -> int:
+    sizes = {
+        np.shape(leaf)[0] if np.ndim(leaf) else None
+        for arg, axis in zip(args, axes, strict=True)
+        if axis == 0
+        for leaf in jax.tree_util.tree_leaves(arg)
+    }
+    if not sizes:
+        raise ValueError("in_axes marks no argument as batched (0); at least one must be")
+    if None in sizes or len(sizes) != 1:
+        raise ValueError(f"the batched arguments' leading axes disagree or are missing: sizes {sizes}")
+    (n,) = sizes
+    if n < 1:
+        raise ValueError("the batch is empty; pass at least one row")
+    return n
+
+
+def _pad(leaf, n_pad: int):
+    """Repeat the last row n_pad times (the padded rows are valid inputs, then dropped)."""
+    if n_pad == 0:
+        return leaf
+    leaf = jnp.asarray(leaf)
+    return jnp.concatenate([leaf, jnp.repeat(leaf[-1:], n_pad, axis=0)], axis=0)
+
+
+def _gather(out):
+    """Bring a multi-host result to every process (single-host results are returned as is)."""
+    if jax.process_count() == 1:
+        return out
+    from jax.experimental import multihost_utils
+
+    return multihost_utils.process_allgather(out, tiled=True)
+
+
+def sweep(
+    fn: Callable[..., Any],
+    *args: Any,
+    in_axes: int | None | Sequence[int | None] = 0,
+    devices: Sequence[jax.Device] | None = None,
+    batch_size: int | None = None,
+) -> Any:
+    """Evaluate `fn` on every row of a batch: `jax.vmap(fn)`, sharded over devices.
+
+    **Arguments:**
+
+    - `fn`: a function of one row, e.g. `lambda kappa, k_r: simulate(Ball(kappa, k_r), y0, 2.0).ys["x"]`;
+      it returns a pytree of arrays. Pass the *same* function object on later calls:
+      the compiled program is cached per function, so new argument values do not
+      recompile (`jaxunilat.debug.trace_counts()["sweep"]` counts the traces).
+    - `*args`: the arguments; every leaf of a batched argument carries the batch
+      along axis 0 (pytrees allowed, e.g. a `Ball` built under `jax.vmap`, whose
+      leaves all have a leading axis).
+    - `in_axes`: 0 (batched) or `None` (the same for every row), for all arguments
+      or one entry per argument. Default 0.
+    - `devices`: the devices to shard over. Default: all of `jax.devices()` (every
+      host's devices after `jax.distributed.initialize()`).
+    - `batch_size`: `None` vmaps all of a device's rows at once; an integer runs them
+      in chunks of that many vmapped rows (`lax.map`), which bounds memory for large
+      batches (a vmapped while loop holds every row's buffers). `1` runs the rows one
+      after another, unbatched: each row's loop stops at its own last step (no
+      lockstep behind the slowest row) and, after `use_loop_kernels()`, compiles into
+      one CPU kernel. On a CPU that is the fastest for event-mode sweeps (README,
+      Performance); on a GPU, vmap.
+
+    **Returns:** `fn`'s outputs stacked along a leading batch axis of the input's
+    length. The batch is padded to a multiple of the device count with copies of its
+    last row; the padding is removed from the result.
+    """
+    compiled, placed, n, n_pad = _prepare(fn, args, in_axes, devices, batch_size)
+    out = _gather(compiled(*placed))
+    if n_pad:
+        out = jax.tree_util.tree_map(lambda leaf: leaf[:n], out)
+    return out
+
+
+def _prepare(fn, args, in_axes, devices, batch_size):
+    if not callable(fn):
+        raise ValueError(f"fn = {fn!r} is not callable")
+    axes = _normalize_axes(in_axes, len(args))
+    devices = tuple(jax.devices() if devices is None else devices)
+    if not devices:
+        raise ValueError("devices is empty; pass at least one device or None for all")
+    if batch_size is not None and (not isinstance(batch_size, (int, np.integer)) or batch_size < 1):
+        raise ValueError(f"batch_size = {batch_size!r} is out of range; valid range is None or integers >= 1")
+    n = _batch_size(args, axes)
+    n_pad = -n % len(devices)
+    _, batched, replicated = _program(fn, axes, devices, batch_size)
+    placed = tuple(
+        jax.tree_util.tree_map(lambda leaf: jax.device_put(_pad(leaf, n_pad), batched), arg)
+        if axis == 0
+        else jax.tree_util.tree_map(lambda leaf: jax.device_put(jnp.asarray(leaf), replicated), arg)
+        for arg, axis in zip(args, axes, strict=True)
+    )
+    return _executable(fn, axes, devices, batch_size, placed), placed, n, n_pad
+
+
+def sweep_compiled(fn: Callable[..., Any], *args: Any, in_axes=0, devices=None, batch_size=None):
+    """The compiled program that `sweep` runs for these arguments (compiling it if needed).
+
+    **Returns:** a `jax.stages.Compiled`; its `memory_analysis()` gives the argument,
+    output and temporary buffer sizes.
+    """
+    return _prepare(fn, args, in_axes, devices, batch_size)[0]
