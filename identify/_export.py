@@ -490,6 +490,57 @@ def mujoco_contact(
     check_choice("match", match, MATCHES)
     check_range("impedance", impedance, lo=_MIN_IMP, hi=_MAX_IMP)
     check_range("mass", mass, lo=0.0, lo_open=True, unit="kg", allow_none=True)
+    fit = _read_fit(fit_or_path, mass)
+    notes: list[str] = []
+    if fit.raw.get("converged") is False:
+        notes.append("the fit did not converge; check it before using these settings")
+    e_fit = _fit_restitution(fit)
+    zeta_fit, dampratio = _dampratio_at_mass(e_fit, fit)
+    same_mass = math.isclose(fit.mass, fit.m_fit, rel_tol=1e-12)
+    restitution = e_fit if same_mass else _restitution_at_mass(dampratio, fit, notes)
+    common = dict(
+        mode=mode,
+        solimp=(float(impedance), float(impedance), 0.001, 0.5, 2.0),
+        mass=fit.mass,
+        fit_mass=fit.fit_mass,
+        source=fit.source,
+        meta=tuple((k, str(fit.raw[k])) for k in ("data", "scene", "observe") if fit.raw.get(k) is not None),
+    )
+    if not fit.kappa_ok:
+        return _e_only_contact(dampratio, restitution, match, notes, common)
+
+    settings = _law_settings(fit, e_fit, zeta_fit, dampratio, restitution, same_mass, notes)
+    if match == "rebound":
+        settings = _rebound_settings(settings, fit, notes)
+    return MujocoContact(
+        solref=_solref(mode, settings),
+        kappa=fit.kappa,
+        k_r=fit.k_r,
+        identifiable=True,
+        notes=tuple(notes),
+        match=match,
+        **settings._asdict(),
+        **common,
+    )
+
+
+class _Fit(NamedTuple):
+    """The fit JSON's numbers, validated: κ (N/m), k_r (N·s/m), e, t_c (s) and the masses (kg)."""
+
+    raw: dict  # the fit JSON itself (flags, correlation, converged, meta)
+    source: str | None  # the fit file's path
+    kappa: Estimate | None
+    k_r: Estimate | None
+    restitution: Estimate | None  # the fit's derived e, if any
+    contact_time: Estimate | None  # the fit's derived t_c (s), if any
+    fit_mass: float | None  # the mass in the fit JSON, kg
+    mass: float  # the effective contact mass of the settings, kg
+    m_fit: float  # the mass the fit's e and t_c belong to, kg
+    kappa_ok: bool  # whether κ is identifiable (and positive)
+
+
+def _read_fit(fit_or_path, mass: float | None) -> _Fit:
+    """Load the fit and check κ, k_r, e, t_c and the masses (kg); `mass` overrides the fit's."""
     fit, source = _load(fit_or_path)
     if not isinstance(fit, dict):
         raise ValueError("fit JSON: the top level must be an object with 'parameters'")
@@ -512,9 +563,7 @@ def mujoco_contact(
         mass = fit_mass
     mass = float(mass)
     m_fit = mass if fit_mass is None else fit_mass
-    same_mass = math.isclose(mass, m_fit, rel_tol=1e-12)
 
-    notes: list[str] = []
     kappa_ok = _identifiable(fit, "kappa", kappa) and kappa is not None and kappa.value > 0
     if kappa is not None and kappa.value <= 0:
         raise ValueError(f"fit JSON: parameters.kappa.value = {kappa.value:g} N/m must be > 0")
@@ -522,79 +571,110 @@ def mujoco_contact(
         raise ValueError(f"fit JSON: parameters.k_r.value = {k_r.value:g} N*s/m must be >= 0")
     if kappa_ok and k_r is None:
         raise ValueError("fit JSON: parameters.k_r is missing")
-    if fit.get("converged") is False:
-        notes.append("the fit did not converge; check it before using these settings")
+    return _Fit(fit, source, kappa, k_r, e_fit, tc_fit, fit_mass, mass, m_fit, kappa_ok)
 
-    # The restitution at the fit's mass: the fit's own, or from κ and k_r.
-    if e_fit is None and kappa is not None and k_r is not None:
-        zeta = _zeta_delta(kappa, k_r, fit.get("correlation"), m_fit)
+
+def _fit_restitution(fit: _Fit) -> Estimate:
+    """The restitution e at the fit's mass: the fit's own, or from κ and k_r; checked to be in (0, 1]."""
+    e_fit = fit.restitution
+    if e_fit is None and fit.kappa is not None and fit.k_r is not None:
+        zeta = _zeta_delta(fit.kappa, fit.k_r, fit.raw.get("correlation"), fit.m_fit)
         if zeta.value < 1:
             e_fit = _monotone(zeta, _e_from_zeta, _de_dzeta)
-    e_ok = e_fit is not None and 0 < e_fit.value <= 1 and _identifiable(fit, "restitution", e_fit)
-    if not kappa_ok and not e_ok:
+    e_ok = e_fit is not None and 0 < e_fit.value <= 1 and _identifiable(fit.raw, "restitution", e_fit)
+    if not fit.kappa_ok and not e_ok:
         raise ValueError(
             "the fit identifies neither kappa nor the restitution e; there is nothing to export "
             "(fit more informative data: impact times or a position trace)"
         )
     if e_fit is None or not 0 < e_fit.value <= 1:
         raise ValueError("fit JSON: the restitution e must be in (0, 1]")
+    return e_fit
 
-    # ζ at the fit's mass from e (monotone), then scaled to the effective mass:
-    # ζ = k_r/(2√(κm)) ∝ m^(-1/2) at fixed κ and k_r.
-    r = math.sqrt(m_fit / mass)
+
+def _dampratio_at_mass(e_fit: Estimate, fit: _Fit) -> tuple[Estimate, Estimate]:
+    """ζ at the fit's mass from e (monotone), and ζ scaled to the effective mass.
+
+    ζ = k_r/(2√(κm)) ∝ m^(-1/2) at fixed κ and k_r. Raises for ζ ≥ 1 (overdamped).
+    """
     zeta_fit = _monotone(e_fit, lambda e: _zeta_from_e(_clip_e(e)), lambda e: _dzeta_de(_clip_e(e)))
-    dampratio = _scale(zeta_fit, r)
+    dampratio = _scale(zeta_fit, math.sqrt(fit.m_fit / fit.mass))
     if dampratio.value >= 1:
         raise ValueError(
-            f"damping ratio zeta = {dampratio.value:.3g} >= 1 at mass {mass:g} kg: the contact is "
+            f"damping ratio zeta = {dampratio.value:.3g} >= 1 at mass {fit.mass:g} kg: the contact is "
             "overdamped (no rebound); MuJoCo's settings would not reproduce a restitution"
         )
-    if same_mass:
-        restitution = e_fit
-    else:
-        restitution = _monotone(dampratio, _e_from_zeta, _de_dzeta)
-        notes.append(
-            f"mass {mass:g} kg differs from the fit's {m_fit:g} kg: the settings keep the fitted kappa and "
-            "k_r, so e and t_c are those of the new mass, not the fitted ones"
-        )
-    e_mj = tc_mj = None
-    if dampratio.value < 1 / math.sqrt(2):
-        e_mj, wt = nonadhesive_rebound(dampratio.value)
+    return zeta_fit, dampratio
 
-    common = dict(
-        mode=mode,
-        solimp=(float(impedance), float(impedance), 0.001, 0.5, 2.0),
-        mass=mass,
-        fit_mass=fit_mass,
+
+def _restitution_at_mass(dampratio: Estimate, fit: _Fit, notes: list[str]) -> Estimate:
+    """e at an effective mass other than the fit's (same κ and k_r), with a note saying so."""
+    notes.append(
+        f"mass {fit.mass:g} kg differs from the fit's {fit.m_fit:g} kg: the settings keep the fitted kappa and "
+        "k_r, so e and t_c are those of the new mass, not the fitted ones"
+    )
+    return _monotone(dampratio, _e_from_zeta, _de_dzeta)
+
+
+def _e_only_contact(
+    dampratio: Estimate, restitution: Estimate, match: str, notes: list[str], common: dict
+) -> MujocoContact:
+    """The result when κ is not identifiable: no `solref`, only e and the damping ratio it fixes."""
+    e_mj = nonadhesive_rebound(dampratio.value)[0] if dampratio.value < 1 / math.sqrt(2) else None
+    notes.insert(
+        0,
+        "kappa is not identifiable from this fit: no solref is exported, only the restitution and "
+        "the damping ratio it fixes; a contact time (impact times or a position trace) would identify kappa",
+    )
+    if match == "rebound":
+        dampratio = _rebound_dampratio(restitution)
+    return MujocoContact(
+        solref=None,
+        kappa=None,
+        k_r=None,
+        stiffness=None,
+        damping=None,
+        timeconst=None,
         dampratio=dampratio,
         restitution=restitution,
+        contact_time=None,
         mujoco_restitution=e_mj,
-        source=source,
-        meta=tuple((k, str(fit[k])) for k in ("data", "scene", "observe") if fit.get(k) is not None),
+        mujoco_contact_time=None,
+        identifiable=False,
+        notes=tuple(notes),
+        match=match,
+        **common,
     )
-    if not kappa_ok:
-        notes.insert(
-            0,
-            "kappa is not identifiable from this fit: no solref is exported, only the restitution and "
-            "the damping ratio it fixes; a contact time (impact times or a position trace) would identify kappa",
-        )
-        if match == "rebound":
-            common.update(dampratio=_rebound_dampratio(restitution), match="rebound")
-        return MujocoContact(
-            solref=None,
-            kappa=None,
-            k_r=None,
-            stiffness=None,
-            damping=None,
-            timeconst=None,
-            contact_time=None,
-            mujoco_contact_time=None,
-            identifiable=False,
-            notes=tuple(notes),
-            **common,
-        )
 
-    # The settings follow κ and k_r; ζ's interval comes from e's (a function of e alone).
+
+class _Settings(NamedTuple):
+    """MuJoCo settings for an identified κ, and the rebound they give (see `MujocoContact`)."""
+
+    stiffness: Estimate  # direct format, 1/s²
+    damping: Estimate  # direct format, 1/s
+    timeconst: Estimate | None  # standard format, s (None for k_r = 0)
+    dampratio: Estimate  # standard format, ζ
+    restitution: Estimate  # Kelvin–Voigt e at the effective mass
+    contact_time: Estimate | None  # Kelvin–Voigt t_c at the effective mass, s
+    mujoco_restitution: float | None  # MuJoCo's non-adhesive e
+    mujoco_contact_time: float | None  # MuJoCo's non-adhesive t_c, s
+
+
+def _law_settings(
+    fit: _Fit,
+    e_fit: Estimate,
+    zeta_fit: Estimate,
+    dampratio: Estimate,
+    restitution: Estimate,
+    same_mass: bool,
+    notes: list[str],
+) -> _Settings:
+    """Settings from κ and k_r (`match="law"`): stiffness κ/m, damping k_r/m, timeconst 2m/k_r.
+
+    ζ's interval comes from e's (a function of e alone) unless e disagrees with κ, k_r
+    and the mass; a note says so and every number then follows κ and k_r.
+    """
+    kappa, k_r, mass, m_fit = fit.kappa, fit.k_r, fit.mass, fit.m_fit
     zeta_direct = k_r.value / (2.0 * math.sqrt(kappa.value * mass))
     if not math.isclose(zeta_direct, dampratio.value, rel_tol=1e-3, abs_tol=1e-9):
         notes.append(
@@ -603,61 +683,63 @@ def mujoco_contact(
             f"not {zeta_fit.value:.6g}); check the mass"
         )
         # Keep every number consistent with the exported κ and k_r.
-        dampratio = _zeta_delta(kappa, k_r, fit.get("correlation"), mass)
+        dampratio = _zeta_delta(kappa, k_r, fit.raw.get("correlation"), mass)
         restitution = _monotone(dampratio, _e_from_zeta, _de_dzeta)
         same_mass = False  # the fit's e and t_c do not describe these κ and k_r
     dampratio = dampratio._replace(value=zeta_direct)
     e_mj, wt = nonadhesive_rebound(zeta_direct) if zeta_direct < 1 / math.sqrt(2) else (None, None)
-    stiffness = _scale(kappa, 1.0 / mass)
-    damping = _scale(k_r, 1.0 / mass)
     timeconst = None
     if k_r.value > 0:
         timeconst = _monotone(
             k_r, lambda c: 2.0 * mass / c if c > 0 else math.inf, lambda c: -2.0 * mass / c**2
         )
-    if same_mass and tc_fit is not None:
-        contact_time = tc_fit
+    if same_mass and fit.contact_time is not None:
+        contact_time = fit.contact_time
     else:
-        contact_time = _contact_time_delta(kappa, k_r, fit.get("correlation"), mass)
-    if e_mj is not None:
-        tc_mj = wt * math.sqrt(mass / kappa.value)
-    common.update(dampratio=dampratio, restitution=restitution, mujoco_restitution=e_mj)
+        contact_time = _contact_time_delta(kappa, k_r, fit.raw.get("correlation"), mass)
+    return _Settings(
+        stiffness=_scale(kappa, 1.0 / mass),
+        damping=_scale(k_r, 1.0 / mass),
+        timeconst=timeconst,
+        dampratio=dampratio,
+        restitution=restitution,
+        contact_time=contact_time,
+        mujoco_restitution=e_mj,
+        mujoco_contact_time=None if e_mj is None else wt * math.sqrt(mass / kappa.value),
+    )
 
-    if match == "rebound":
-        if contact_time is None:
-            raise ValueError("match='rebound' needs the contact time t_c, which these parameters do not give")
-        stiffness, damping, timeconst, dampratio = _match_rebound(restitution, contact_time)
-        zeta_direct = dampratio.value
-        tc_mj, e_mj = contact_time.value, restitution.value
-        common.update(dampratio=dampratio, mujoco_restitution=e_mj, match="rebound")
-        notes.append(
-            "match='rebound': the stiffness and damping are chosen so that MuJoCo's contact, which cannot "
-            f"pull, reproduces the fitted e and t_c; they are {stiffness.value * mass / kappa.value:.6g} and "
-            f"{damping.value * mass / k_r.value if k_r.value > 0 else math.inf:.6g} times kappa/m and k_r/m"
-        )
 
-    if mode == "direct":
-        solref = (-stiffness.value, -damping.value)
-    else:
-        if timeconst is None:
-            raise ValueError(
-                "k_r = 0: the standard format cannot express an undamped contact (timeconst = 2m/k_r is "
-                "infinite); use mode='direct' (--mode direct)"
-            )
-        solref = (timeconst.value, zeta_direct)
-    return MujocoContact(
-        solref=solref,
-        kappa=kappa,
-        k_r=k_r,
+def _rebound_settings(law: _Settings, fit: _Fit, notes: list[str]) -> _Settings:
+    """`match="rebound"`: settings whose non-adhesive contact rebounds with the law's e and t_c (s)."""
+    if law.contact_time is None:
+        raise ValueError("match='rebound' needs the contact time t_c, which these parameters do not give")
+    stiffness, damping, timeconst, dampratio = _match_rebound(law.restitution, law.contact_time)
+    kappa, k_r, mass = fit.kappa, fit.k_r, fit.mass
+    notes.append(
+        "match='rebound': the stiffness and damping are chosen so that MuJoCo's contact, which cannot "
+        f"pull, reproduces the fitted e and t_c; they are {stiffness.value * mass / kappa.value:.6g} and "
+        f"{damping.value * mass / k_r.value if k_r.value > 0 else math.inf:.6g} times kappa/m and k_r/m"
+    )
+    return law._replace(
         stiffness=stiffness,
         damping=damping,
         timeconst=timeconst,
-        contact_time=contact_time,
-        mujoco_contact_time=tc_mj,
-        identifiable=True,
-        notes=tuple(notes),
-        **common,
+        dampratio=dampratio,
+        mujoco_restitution=law.restitution.value,
+        mujoco_contact_time=law.contact_time.value,
     )
+
+
+def _solref(mode: str, settings: _Settings) -> tuple[float, float]:
+    """The two `solref` numbers: (−stiffness, −damping) in 1/s², 1/s, or (timeconst (s), dampratio)."""
+    if mode == "direct":
+        return (-settings.stiffness.value, -settings.damping.value)
+    if settings.timeconst is None:
+        raise ValueError(
+            "k_r = 0: the standard format cannot express an undamped contact (timeconst = 2m/k_r is "
+            "infinite); use mode='direct' (--mode direct)"
+        )
+    return (settings.timeconst.value, settings.dampratio.value)
 
 
 def _zeta_for_rebound(e: float) -> float:
