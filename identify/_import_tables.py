@@ -316,7 +316,7 @@ def _read_xlsx(name: str) -> Table:
     raise ValueError(problems[0] if problems else f"{name}: row 1: the workbook has no data")
 
 
-# -- phyphox -----------------------------------------------------------------------------
+# -- shared by the phyphox and video importers -------------------------------------------
 
 
 def _seconds(table: Table, col: Column, notes: list[str]) -> float:
@@ -346,6 +346,43 @@ def _find(columns: list[Column], patterns) -> int | None:
             if re.fullmatch(pattern, c.name, flags=re.IGNORECASE):
                 return i
     return None
+
+
+def _noise_note(noise: float | None, notes: list[str]) -> None:
+    """Say that no noise is written when `noise` is not given (a fit estimates σ)."""
+    if noise is None:
+        notes.append("noise: none written (a fit estimates sigma from its residuals); --noise sets it")
+
+
+def _table_result(
+    table: Table,
+    ds,
+    *,
+    importer: str,
+    source: str,
+    accepted,
+    rejected,
+    notes: list[str],
+    warnings=(),
+    noise_estimate: float | None = None,
+    noise_method: str = "",
+) -> ImportResult:
+    """The `ImportResult` of a table import, with the table's description as its info."""
+    return ImportResult(
+        dataset=ds,
+        importer=importer,
+        source=source,
+        accepted=accepted,
+        rejected=tuple(rejected),
+        warnings=tuple(warnings),
+        noise_estimate=noise_estimate,
+        noise_method=noise_method,
+        notes=tuple(notes),
+        info=(table.describe(),),
+    )
+
+
+# -- phyphox -----------------------------------------------------------------------------
 
 
 def import_phyphox(
@@ -381,102 +418,7 @@ def import_phyphox(
     notes: list[str] = []
     rejected: list[Rejected] = _trailing(table)
     warnings: list[str] = []
-    cols = table.columns
-    time_i = _find(cols, (r"event\s*time", r"time", r"t", r"timestamp", r".*time.*"))
-    interval_i = _find(cols, (r"interval", r"difference", r"dt", r"delta\s*t", r"Δt", r".*interval.*"))
-    wide = [i for i, c in enumerate(cols) if re.fullmatch(r"start|stop(\s*\d+)?|bounce\s*\d+", c.name, re.I)]
-    times: list[float] = []
-    lines: list[int] = []
-    if time_i is None and len(wide) >= 2:
-        scale = _seconds(table, cols[wide[0]], notes)
-        (line, values), *others = table.rows
-        if others:
-            warnings.append(
-                f"{len(others)} more rows after {table.unit} {line} are not read (one-row export)"
-            )
-        for k, i in enumerate(wide):
-            v = values[i]
-            if v is None or (k > 0 and v <= 0):
-                rejected.append(
-                    Rejected(math.nan, f"column {cols[i].header!r}: no event (not triggered)", line)
-                )
-                continue
-            if times and v * scale <= times[-1]:
-                rejected.append(
-                    Rejected(v * scale, f"column {cols[i].header!r}: not after the previous event", line)
-                )
-                continue
-            times.append(v * scale)
-            lines.append(line)
-        notes.append(
-            "one-row export: events read from the " + ", ".join(cols[i].header for i in wide) + " columns "
-            "(the app's heights and energies, which assume no drag, are not read)"
-        )
-    elif time_i is not None:
-        scale = _seconds(table, cols[time_i], notes)
-        iscale = _seconds(table, cols[interval_i], notes) if interval_i is not None else 1.0
-        previous = None  # the previous row's time, kept or not
-        for line, values in table.rows:
-            t = values[time_i]
-            dt = values[interval_i] if interval_i is not None else None
-            if t is None:
-                rejected.append(Rejected(math.nan, "no event time in this row", line))
-                continue
-            t *= scale
-            if dt is not None:
-                dt *= iscale
-            if times and t == times[-1]:
-                rejected.append(Rejected(t, f"duplicate of line {lines[-1]} (interval 0)", line))
-            elif times and t < times[-1]:
-                rejected.append(
-                    Rejected(t, f"before the previous event at {times[-1]:.6f} s (negative interval)", line)
-                )
-            elif times and dt is not None and dt == 0:
-                rejected.append(Rejected(t, "interval 0.000 s: a duplicate or spurious row", line))
-            else:
-                if (
-                    previous is not None
-                    and dt is not None
-                    and abs(dt - (t - previous)) > max(2e-6, 1e-4 * abs(dt))
-                ):
-                    warnings.append(
-                        f"line {line}: interval {dt:.6f} s disagrees with the event times ({t - previous:.6f} s)"
-                    )
-                times.append(t)
-                lines.append(line)
-            previous = t
-        notes.append(f"onset times from column {cols[time_i].header!r}")
-    elif interval_i is not None:
-        scale = _seconds(table, cols[interval_i], notes)
-        t = 0.0
-        for k, (line, values) in enumerate(table.rows):
-            dt = values[interval_i]
-            if k == 0 and (dt is None or dt == 0):
-                times.append(0.0)
-                lines.append(line)
-                continue
-            if k == 0:
-                times.append(0.0)  # the first interval starts at the first event
-                lines.append(line)
-            if dt is None:
-                rejected.append(Rejected(math.nan, "no interval in this row", line))
-            elif dt == 0:
-                rejected.append(Rejected(t, "interval 0.000 s: a duplicate or spurious row", line))
-            elif dt < 0:
-                rejected.append(Rejected(math.nan, f"negative interval {dt * scale:.6f} s", line))
-            else:
-                t += dt * scale
-                times.append(t)
-                lines.append(line)
-        notes.append(
-            f"onset times by cumulating column {cols[interval_i].header!r} (the first event at t = 0; "
-            "the clock offset is unknown anyway)"
-        )
-    else:
-        raise ValueError(
-            f"{table.at(table.header_line)}: no event-time or interval column among "
-            f'{", ".join(repr(c.header) for c in cols)}; expected e.g. "Event time (s)" or "Interval (s)"'
-        )
+    times, lines = _phyphox_events(table, notes, warnings, rejected)
     times_a = np.asarray(times, dtype=float)
     fit = fit_intervals(times_a)
     warnings += interval_warnings(times_a, fit, lines)
@@ -488,20 +430,152 @@ def import_phyphox(
         times_a, source=name, importer="phyphox", mass=mass, drag=drag, x0=x0, v0=v0, noise=noise
     )
     notes += more
-    if noise is None:
-        notes.append("noise: none written (a fit estimates sigma from its residuals); --noise sets it")
-    return ImportResult(
-        dataset=ds,
+    _noise_note(noise, notes)
+    return _table_result(
+        table,
+        ds,
         importer="phyphox",
         source=name,
         accepted=times_a,
-        rejected=tuple(sorted(rejected, key=lambda r: r.line or 0)),
-        warnings=tuple(warnings),
+        rejected=sorted(rejected, key=lambda r: r.line or 0),
+        notes=notes,
+        warnings=warnings,
         noise_estimate=estimate,
         noise_method=method or "",
-        notes=tuple(notes),
-        info=(table.describe(),),
     )
+
+
+def _phyphox_events(
+    table: Table, notes: list[str], warnings: list[str], rejected: list[Rejected]
+) -> tuple[list[float], list[int]]:
+    """The onset times (s) and their lines, from whichever columns the export has."""
+    cols = table.columns
+    time_i = _find(cols, (r"event\s*time", r"time", r"t", r"timestamp", r".*time.*"))
+    interval_i = _find(cols, (r"interval", r"difference", r"dt", r"delta\s*t", r"Δt", r".*interval.*"))
+    wide = [i for i, c in enumerate(cols) if re.fullmatch(r"start|stop(\s*\d+)?|bounce\s*\d+", c.name, re.I)]
+    if time_i is None and len(wide) >= 2:
+        return _one_row_events(table, wide, notes, warnings, rejected)
+    if time_i is not None:
+        return _timed_events(table, time_i, interval_i, notes, warnings, rejected)
+    if interval_i is not None:
+        return _cumulated_events(table, interval_i, notes, rejected)
+    raise ValueError(
+        f"{table.at(table.header_line)}: no event-time or interval column among "
+        f'{", ".join(repr(c.header) for c in cols)}; expected e.g. "Event time (s)" or "Interval (s)"'
+    )
+
+
+def _one_row_events(
+    table: Table, wide: list[int], notes: list[str], warnings: list[str], rejected: list[Rejected]
+) -> tuple[list[float], list[int]]:
+    """Onset times (s) from a one-row export's `Start`/`Stop k` or `Bounce k` columns."""
+    cols = table.columns
+    times: list[float] = []
+    lines: list[int] = []
+    scale = _seconds(table, cols[wide[0]], notes)
+    (line, values), *others = table.rows
+    if others:
+        warnings.append(f"{len(others)} more rows after {table.unit} {line} are not read (one-row export)")
+    for k, i in enumerate(wide):
+        v = values[i]
+        if v is None or (k > 0 and v <= 0):
+            rejected.append(Rejected(math.nan, f"column {cols[i].header!r}: no event (not triggered)", line))
+            continue
+        if times and v * scale <= times[-1]:
+            rejected.append(
+                Rejected(v * scale, f"column {cols[i].header!r}: not after the previous event", line)
+            )
+            continue
+        times.append(v * scale)
+        lines.append(line)
+    notes.append(
+        "one-row export: events read from the " + ", ".join(cols[i].header for i in wide) + " columns "
+        "(the app's heights and energies, which assume no drag, are not read)"
+    )
+    return times, lines
+
+
+def _timed_events(
+    table: Table,
+    time_i: int,
+    interval_i: int | None,
+    notes: list[str],
+    warnings: list[str],
+    rejected: list[Rejected],
+) -> tuple[list[float], list[int]]:
+    """Onset times (s) from the event-time column, checked against the interval column if any."""
+    cols = table.columns
+    times: list[float] = []
+    lines: list[int] = []
+    scale = _seconds(table, cols[time_i], notes)
+    iscale = _seconds(table, cols[interval_i], notes) if interval_i is not None else 1.0
+    previous = None  # the previous row's time, kept or not
+    for line, values in table.rows:
+        t = values[time_i]
+        dt = values[interval_i] if interval_i is not None else None
+        if t is None:
+            rejected.append(Rejected(math.nan, "no event time in this row", line))
+            continue
+        t *= scale
+        if dt is not None:
+            dt *= iscale
+        if times and t == times[-1]:
+            rejected.append(Rejected(t, f"duplicate of line {lines[-1]} (interval 0)", line))
+        elif times and t < times[-1]:
+            rejected.append(
+                Rejected(t, f"before the previous event at {times[-1]:.6f} s (negative interval)", line)
+            )
+        elif times and dt is not None and dt == 0:
+            rejected.append(Rejected(t, "interval 0.000 s: a duplicate or spurious row", line))
+        else:
+            if (
+                previous is not None
+                and dt is not None
+                and abs(dt - (t - previous)) > max(2e-6, 1e-4 * abs(dt))
+            ):
+                warnings.append(
+                    f"line {line}: interval {dt:.6f} s disagrees with the event times ({t - previous:.6f} s)"
+                )
+            times.append(t)
+            lines.append(line)
+        previous = t
+    notes.append(f"onset times from column {cols[time_i].header!r}")
+    return times, lines
+
+
+def _cumulated_events(
+    table: Table, interval_i: int, notes: list[str], rejected: list[Rejected]
+) -> tuple[list[float], list[int]]:
+    """Onset times (s) by cumulating the interval column, the first event at t = 0."""
+    cols = table.columns
+    times: list[float] = []
+    lines: list[int] = []
+    scale = _seconds(table, cols[interval_i], notes)
+    t = 0.0
+    for k, (line, values) in enumerate(table.rows):
+        dt = values[interval_i]
+        if k == 0 and (dt is None or dt == 0):
+            times.append(0.0)
+            lines.append(line)
+            continue
+        if k == 0:
+            times.append(0.0)  # the first interval starts at the first event
+            lines.append(line)
+        if dt is None:
+            rejected.append(Rejected(math.nan, "no interval in this row", line))
+        elif dt == 0:
+            rejected.append(Rejected(t, "interval 0.000 s: a duplicate or spurious row", line))
+        elif dt < 0:
+            rejected.append(Rejected(math.nan, f"negative interval {dt * scale:.6f} s", line))
+        else:
+            t += dt * scale
+            times.append(t)
+            lines.append(line)
+    notes.append(
+        f"onset times by cumulating column {cols[interval_i].header!r} (the first event at t = 0; "
+        "the clock offset is unknown anyway)"
+    )
+    return times, lines
 
 
 # -- video tracking ----------------------------------------------------------------------
@@ -543,13 +617,56 @@ def import_video(
     check_range("scale", scale, lo=0.0, lo_open=True, unit="m per unit", allow_none=True)
     table = read_table(path)
     name = os.fspath(path)
+    notes: list[str] = []
+    time_i, height_i = _video_columns(table, column, notes)
+    hcol = table.columns[height_i]
+    tscale = _seconds(table, table.columns[time_i], notes)
+    hscale = _height_scale(table, hcol, scale, notes)
+    rejected = _trailing(table)
+    t_a, x_a, lines = _video_rows(table, time_i, height_i, tscale, hscale, rejected)
+    t0 = float(t_a[0])
+    if x0 is None:
+        x0 = float(x_a[0])
+        if x0 < 0:
+            raise ValueError(
+                f"{table.at(lines[0])}: the first height {x0:g} m is below the floor; heights must be measured "
+                "up from the floor (put the tracking origin on it), or pass --x0"
+            )
+        notes.append(f"x0 = {x0:.6g} m: the first sample's height")
+    if v0 is None:
+        v0 = 0.0
+        notes.append("v0 = 0 (the first sample taken at rest, at the release)")
+    notes.append(
+        f"t = 0 is the first tracked sample (file time {t0:g} s): video time zero is the first frame, not the "
+        f"release; heights from column {hcol.header!r} times {hscale:g} m per unit"
+    )
+    _noise_note(noise, notes)
+    ds = drop_dataset(
+        notes,
+        observe="trace",
+        source=name,
+        importer="video",
+        mass=mass,
+        drag=drag,
+        x0=x0,
+        v0=v0,
+        noise=noise,
+        t=t_a - t0,
+        x=x_a,
+    )
+    return _table_result(
+        table, ds, importer="video", source=name, accepted=t_a, rejected=rejected, notes=notes
+    )
+
+
+def _video_columns(table: Table, column: str | None, notes: list[str]) -> tuple[int, int]:
+    """The indices of the time column and of the height column (`column`, else `y`, else the other one)."""
     cols = table.columns
     if len(cols) < 2:
         raise ValueError(
             f"{table.at(table.header_line)}: one column ({cols[0].header!r}); a video table needs a time "
             "column and a height column (wrong separator?)"
         )
-    notes: list[str] = []
     time_i = _find(cols, (r"t", r"time"))
     if time_i is None:
         time_i = 0
@@ -572,25 +689,34 @@ def import_video(
         raise ValueError(
             f"{table.at(table.header_line)}: the height column {cols[height_i].header!r} is the time column"
         )
-    tcol, hcol = cols[time_i], cols[height_i]
-    tscale = _seconds(table, tcol, notes)
+    return time_i, height_i
+
+
+def _height_scale(table: Table, hcol: Column, scale: float | None, notes: list[str]) -> float:
+    """Metres per unit of the height column: `scale` if given, else from its header unit (m, cm, mm)."""
     if scale is not None:
         if hcol.unit is not None:
             notes.append(f"--scale {scale:g} m per unit overrides the header unit {hcol.unit!r}")
-        hscale = scale
-    elif hcol.unit is None:
+        return scale
+    if hcol.unit is None:
         raise ValueError(
             f"{table.at(table.header_line)}: column {hcol.header!r} has no unit; write it in the header, "
             "e.g. 'y (cm)', or pass --scale (metres per unit)"
         )
-    else:
-        hscale = _LENGTH_UNITS.get(hcol.unit.lower())
-        if hscale is None:
-            raise ValueError(
-                f"{table.at(table.header_line)}: column {hcol.header!r}: unit {hcol.unit!r} is not a length "
-                f"unit this reader knows ({', '.join(_LENGTH_UNITS)}); pass --scale (metres per unit)"
-            )
-    rejected = _trailing(table)
+    hscale = _LENGTH_UNITS.get(hcol.unit.lower())
+    if hscale is None:
+        raise ValueError(
+            f"{table.at(table.header_line)}: column {hcol.header!r}: unit {hcol.unit!r} is not a length "
+            f"unit this reader knows ({', '.join(_LENGTH_UNITS)}); pass --scale (metres per unit)"
+        )
+    return hscale
+
+
+def _video_rows(
+    table: Table, time_i: int, height_i: int, tscale: float, hscale: float, rejected: list[Rejected]
+) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """Times (s), heights (m) and lines of the tracked rows; untracked frames go to `rejected`."""
+    tcol, hcol = table.columns[time_i], table.columns[height_i]
     t, x, lines = [], [], []
     for line, values in table.rows:
         tv, hv = values[time_i], values[height_i]
@@ -611,50 +737,7 @@ def import_video(
         lines.append(line)
     if len(t) < 3:
         raise ValueError(f"{table.at(table.header_line)}: {len(t)} usable rows; a trace needs at least 3")
-    t_a, x_a = np.asarray(t), np.asarray(x)
-    t0 = float(t_a[0])
-    if x0 is None:
-        x0 = float(x_a[0])
-        if x0 < 0:
-            raise ValueError(
-                f"{table.at(lines[0])}: the first height {x0:g} m is below the floor; heights must be measured "
-                "up from the floor (put the tracking origin on it), or pass --x0"
-            )
-        notes.append(f"x0 = {x0:.6g} m: the first sample's height")
-    if v0 is None:
-        v0 = 0.0
-        notes.append("v0 = 0 (the first sample taken at rest, at the release)")
-    notes.append(
-        f"t = 0 is the first tracked sample (file time {t0:g} s): video time zero is the first frame, not the "
-        f"release; heights from column {hcol.header!r} times {hscale:g} m per unit"
-    )
-    if noise is None:
-        notes.append("noise: none written (a fit estimates sigma from its residuals); --noise sets it")
-    ds = drop_dataset(
-        notes,
-        observe="trace",
-        source=name,
-        importer="video",
-        mass=mass,
-        drag=drag,
-        x0=x0,
-        v0=v0,
-        noise=noise,
-        t=t_a - t0,
-        x=x_a,
-    )
-    return ImportResult(
-        dataset=ds,
-        importer="video",
-        source=name,
-        accepted=t_a,
-        rejected=tuple(rejected),
-        warnings=(),
-        noise_estimate=None,
-        noise_method="",
-        notes=tuple(notes),
-        info=(table.describe(),),
-    )
+    return np.asarray(t), np.asarray(x), lines
 
 
 def plot_table_import(result: ImportResult, *, title: str | None = None):
