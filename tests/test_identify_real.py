@@ -192,16 +192,14 @@ def test_cli_joint_fit_json_and_exit_codes(tmp_path, kv_drops, monkeypatch, caps
     assert doc["law"] == "kelvin-voigt" and [o["rows"] for o in doc["outliers"]] == [[], []]
     assert "laws" in doc and "holdout" in doc and doc["converged"] is True
     # A fit that does not converge exits 3 and still writes its JSON, converged: false.
-    import identify._fit as fit_module
-
-    real = fit_module.fit
+    real = identify.fit
 
     def not_converged(*args, **kwargs):
         result = real(*args, **kwargs)
         result.converged, result.message = False, "max_iterations = 1 reached"
         return result
 
-    monkeypatch.setattr(fit_module, "fit", not_converged)
+    monkeypatch.setattr(identify, "fit", not_converged)
     assert main(["identify", paths[0], "--fit", "offset", "--json", str(out), "--starts", "1"]) == 3
     assert json.loads(out.read_text())["converged"] is False
     assert "exit status 3" in capsys.readouterr().out
