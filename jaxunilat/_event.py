@@ -74,7 +74,7 @@ import dataclasses
 import equinox.internal as eqxi
 import jax.numpy as jnp
 
-from ._event_locate import _locate as _locate
+from ._event_locate import locate as _locate  # noqa: F401 (the tests import it from here)
 from ._event_output import (
     EventRecord as EventRecord,
     _contact_steps_sequential as _contact_steps_sequential,
@@ -85,7 +85,11 @@ from ._event_output import (
     record_step,
     save_outputs,
 )
-from ._event_pieces import PIECE_SOLVERS as PIECE_SOLVERS, _erk_step as _erk_step, next_piece
+from ._event_pieces import (
+    PIECE_SOLVERS as PIECE_SOLVERS,
+    erk_step as _erk_step,  # noqa: F401 (the tests import it from here)
+    next_piece,
+)
 from ._event_state import (
     _EV as _EV,
     _REC as _REC,

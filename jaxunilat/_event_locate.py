@@ -2,8 +2,8 @@
 
 Detection is cheap and runs after every accepted step (`Trial.eventful`: a sign change on
 the step's sub-grid); location runs only on a step with an event in it. Roots are found
-on the step's dense interpolant under `stop_gradient` (`_locate`), then polished on the
-pair's own step (`_refine`), and each carries its implicit-function derivative through
+on the step's dense interpolant under `stop_gradient` (`locate`), then polished on the
+pair's own step (`refine`), and each carries its implicit-function derivative through
 one differentiable Newton update whose value is ~0.
 """
 
@@ -14,13 +14,13 @@ import jax.numpy as jnp
 
 from ._event_state import Trial
 
-#: Newton iterations of `_locate`. Most roots converge within 5, but grazing crossings
+#: Newton iterations of `locate`. Most roots converge within 5, but grazing crossings
 #: need more: with 6 or 8 the stress suite had silent failures (Dopri8, grazing family).
 _ITERATIONS = 12
 _REFINE_ITERATIONS = 2
 
 
-def _locate(f, a, b, positive_left=None, active=None):
+def locate(f, a, b, positive_left=None, active=None):
     """A root of f in [a, b], given that f changes sign on (a, b].
 
     `positive_left` (optional) is the sign of f just right of a, where f(a) itself may
@@ -65,7 +65,7 @@ def _locate(f, a, b, positive_left=None, active=None):
     return root - (step - jax.lax.stop_gradient(step))
 
 
-def _refine(state_at, rate, value_of, t_root, y_root, radius):
+def refine(state_at, rate, value_of, t_root, y_root, radius):
     """Polish an event time on the integrator's own step, differentiably.
 
     `state_at(t)` is the state one step after the piece's start (the pair's step of
@@ -126,7 +126,7 @@ def locate_extremum(model, trial: Trial, direction, kink: bool):
     sign_left = (jnp.where(j == 0, obs_start, obs_sub[jnp.maximum(j - 1, 0)]) > 0) if kink else None
     t_ext = jax.lax.cond(
         trial.has_ext,
-        lambda: _locate(lambda s: model.observable(trial.dense(s)), lo, sub_t[j], sign_left),
+        lambda: locate(lambda s: model.observable(trial.dense(s)), lo, sub_t[j], sign_left),
         lambda: trial.t_next,
     )
     return t_ext, trial.dense(t_ext)
@@ -169,7 +169,7 @@ def first_crossing(model, trial: Trial, mask, t_ext, y_ext):
     def root_of(i):
         pc = jnp.minimum(first_pt[i], n_pts - 1)
         a = jnp.where(first_pt[i] == 0, t, check_t[jnp.maximum(pc - 1, 0)])
-        return _locate(lambda s: model.switches(trial.dense(s))[i], a, check_t[pc], active=first[i])
+        return locate(lambda s: model.switches(trial.dense(s))[i], a, check_t[pc], active=first[i])
 
     roots = jax.lax.cond(
         crossing,

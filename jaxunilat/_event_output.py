@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array
 
-from ._event_pieces import _erk_step
+from ._event_pieces import erk_step
 from ._event_state import _EV, _REC, Piece, Problem, State
 
 
@@ -98,7 +98,7 @@ def _step_to(problem: Problem, s, row):
         return problem.rhs(tt, z, mask, sign)
 
     def rk_step():
-        return _erk_step(problem.solver_cls, piece_rhs, t_st, s - t_st, y_st, piece_rhs(t_st, y_st))[0]
+        return erk_step(problem.solver_cls, piece_rhs, t_st, s - t_st, y_st, piece_rhs(t_st, y_st))[0]
 
     if not problem.settles:
         return rk_step()

@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 
 from . import _dense
-from ._event_locate import _refine, first_crossing, locate_extremum
+from ._event_locate import first_crossing, locate_extremum, refine
 from ._event_state import Piece, PieceEnd, Problem, State, Trial, packed_cond, region_index
 
 #: The Runge–Kutta pairs the event mode can integrate its smooth pieces with:
@@ -32,7 +32,7 @@ PIECE_SOLVERS = {"tsit5": (dfx.Tsit5, 1 / 5), "dopri8": (dfx.Dopri8, 1 / 8)}
 _NEGLIGIBLE_KINK = 1e-3
 
 
-def _erk_step(solver_cls, f, t, h, y, f0):
+def erk_step(solver_cls, f, t, h, y, f0):
     """One step of an FSAL explicit RK pair from diffrax's Butcher tableau, unrolled.
 
     `f0` = f(t, y) (first same as last). Returns (y1, y_error, k, f1) where k is the
@@ -90,7 +90,7 @@ def trial_step(problem: Problem, state: State) -> Trial:
     h = jnp.minimum(jnp.minimum(state.dt, problem.dtmax), t1 - t)
     t_next = jnp.where(t1 - (t + h) < 1e-12 * jnp.abs(t1), t1, t + h)
     h = t_next - t
-    y1, y_err, k, f1 = _erk_step(problem.solver_cls, _piece_rhs(problem, mask, direction), t, h, y, state.f0)
+    y1, y_err, k, f1 = erk_step(problem.solver_cls, _piece_rhs(problem, mask, direction), t, h, y, state.f0)
     coeffs = _dense.coefficients(problem.solver_cls, k)
     scale = problem.atol + problem.rtol * jnp.maximum(jnp.abs(y), jnp.abs(y1))
     err = jnp.sqrt(jnp.mean((y_err / scale) ** 2))
@@ -259,12 +259,12 @@ def _refined_end(problem: Problem, state: State, trial: Trial, crossing, flip, w
     piece_rhs = _piece_rhs(problem, state.mask, state.direction)
 
     def at(tt):
-        return _erk_step(problem.solver_cls, piece_rhs, t, tt - t, y, state.f0)[0]
+        return erk_step(problem.solver_cls, piece_rhs, t, tt - t, y, state.f0)[0]
 
     def event_value(z):
         return jnp.where(flip, model.observable(z), model.switches(z)[wall])
 
-    t_ref, y_ref = _refine(at, piece_rhs, event_value, t_end, y_end, 1e-3 * trial.h)
+    t_ref, y_ref = refine(at, piece_rhs, event_value, t_end, y_end, 1e-3 * trial.h)
     y_end = jnp.where(crossing | flip, y_ref, trial.y1)
     t_end = jnp.where(crossing | flip, t_ref, trial.t_next)
     return t_end, y_end
