@@ -123,3 +123,18 @@ def test_namespaces_and_the_aliases_of_their_old_top_level_names():
         assert "no_such_name" in str(err)
     else:
         raise AssertionError("an unknown attribute must raise AttributeError")
+
+
+def test_no_function_is_over_150_lines():
+    """Functions short enough to read, in both packages (docstrings included)."""
+    import ast
+
+    long = []
+    for package in ("jaxunilat", "identify"):
+        for path in sorted((_ROOT / package).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    lines = node.end_lineno - node.lineno + 1
+                    if lines > 150:
+                        long.append(f"{path.relative_to(_ROOT)}:{node.lineno}: {node.name} ({lines} lines)")
+    assert long == []

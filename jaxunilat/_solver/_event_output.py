@@ -1,0 +1,249 @@
+"""The event mode's records and outputs: the event buffer, the step record and the
+outputs at the save times.
+
+Every event (entry, exit, apex, deepest point) is recorded in a fixed-size buffer
+(`record_event`), and the start (time, state, region) of every accepted step that holds
+a save time in another, at most one row per save time (`record_step`). After the loop
+each output at a save time s is the pair's own step from the start of the recorded step
+that holds s, of length s − t_start, or in free flight the model's closed form
+(`save_outputs`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import equinox as eqx
+import equinox.internal as eqxi
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array
+
+from ._event_pieces import erk_step
+from ._event_state import _EV, _REC, Piece, Problem, State
+
+
+class EventRecord(eqx.Module):
+    """The events of an event-mode run, in time order, padded to `max_events`.
+
+    **Fields:**
+
+    - `t`: event times, s (padding: +inf).
+    - `y`: the state at each event.
+    - `kind`: 1 = contact entry, 2 = contact exit, 3 = extremum of the observable
+      (an apex in flight, the deepest point in contact); 0 = padding.
+    - `wall`: the wall's index (lower first) for entries, exits and deepest points;
+      −1 for an apex in flight.
+    - `peak_force`: for exits, the largest |contact force| seen during that
+      contact on the step sub-grid, N.
+    - `count`: how many events were recorded.
+    - `open_peak_force`: the running peak of a contact still open at t1, N.
+    - `rest_time`: the time from which the contact open at t1 provably never ends
+      (the ball rests on the lower wall: see `Ball.rest_error`), s; +inf if none.
+      Such a contact has no exit and, once resting, no further events.
+    """
+
+    t: Array
+    y: Array
+    kind: Array
+    wall: Array
+    peak_force: Array
+    count: Array
+    open_peak_force: Array
+    rest_time: Array
+
+
+def record_event(problem: Problem, state: State, pred, t, y, kind, wall, peak) -> State:
+    """`state` with the event (time t, s; state y; kind; wall; peak force, N) appended
+    to the event buffer where `pred`; a full buffer sets `overflow` instead."""
+    dtype = state.y.dtype
+    i = state.n_events
+    ok = pred & (i < problem.max_events)
+    head = jnp.stack([t, jnp.asarray(kind, dtype), jnp.asarray(wall, dtype), jnp.asarray(peak, dtype)])
+    return dataclasses.replace(
+        state,
+        ev=eqxi.buffer_at_set(state.ev, i, jnp.concatenate([head, y]), pred=ok),
+        n_events=i + jnp.where(ok, 1, 0),
+        overflow=state.overflow | (pred & (i >= problem.max_events)),
+    )
+
+
+def record_step(problem: Problem, state: State, piece: Piece) -> State:
+    """`state` with the accepted piece's start recorded (valid on [t, t_end]) if a save
+    time lies in it. Its direction column is 0 for a resting piece (`_step_to` then
+    takes the closed form)."""
+    ts, n_ts, dtype = problem.ts, problem.ts.shape[0], state.y.dtype
+    t_end = piece.end.t_end
+    holds = piece.accept & (state.saved < n_ts) & (ts[jnp.minimum(state.saved, n_ts - 1)] <= t_end)
+    first = state.saved.astype(dtype)
+    direction = jnp.where(state.resting, 0.0, state.direction) if problem.settles else state.direction
+    row = jnp.concatenate([jnp.stack([state.t, t_end, direction, first]), state.mask.astype(dtype), state.y])
+    return dataclasses.replace(
+        state,
+        rec=eqxi.buffer_at_set(state.rec, state.n_rec, row, pred=holds & (state.n_rec < problem.rows)),
+        n_rec=state.n_rec + jnp.where(holds, 1, 0),
+        saved=jnp.where(holds, _count_at_or_before(ts, t_end), state.saved),
+    )
+
+
+def _step_to(problem: Problem, s, row):
+    """The state at save time s (s) from a recorded row: the pair's step of length
+    s − t_start, or a resting row's closed form."""
+    n_sw = problem.n_sw
+    t_st, sign = row[0], row[2]
+    mask, y_st = row[_REC : _REC + n_sw] != 0, row[_REC + n_sw :]
+
+    def piece_rhs(tt, z):
+        return problem.rhs(tt, z, mask, sign)
+
+    def rk_step():
+        return erk_step(problem.solver_cls, piece_rhs, t_st, s - t_st, y_st, piece_rhs(t_st, y_st))[0]
+
+    if not problem.settles:
+        return rk_step()
+    return jax.lax.cond(sign == 0, lambda: problem.model.rest_state(y_st, s - t_st), rk_step)
+
+
+def save_outputs(problem: Problem, final: State, y0, outputs) -> dict:
+    """The outputs at the save times: NaN after the last time reached.
+
+    The pair's own step from the start of the recorded step that holds each time (as
+    accurate as a step, so the tolerance bounds the outputs too; the dense interpolant
+    is much less accurate inside Dopri8's long flight steps), and in free flight the
+    closed form from there.
+    """
+    model, ts, n_sw, rec = problem.model, problem.ts, problem.n_sw, final.rec
+    step_to = functools.partial(_step_to, problem)
+    if problem.closed_flight:
+        # Steps of the pair only at the times in contact (the contacts last milliseconds).
+        index, contact, y_contact = _contact_steps(rec, final.n_rec, ts, n_sw, step_to)
+        held = rec[index]
+        t_start, direction = held[:, 0], held[:, 2]
+        tau = jnp.where(contact, 0.0, ts - t_start)
+        y_flight = jax.vmap(model.flight_state)(held[:, _REC + n_sw :], tau, direction)
+        y = jnp.where(contact[:, None], y_contact, y_flight)
+    else:
+        y = jax.vmap(step_to)(ts, rec[_rows_of_times(rec, final.n_rec, ts.shape[0])])
+    y = jnp.where((ts == problem.t0)[:, None], y0, y)
+    ys = {name: jax.vmap(lambda s, z, name=name: model.output(name, s, z))(ts, y) for name in outputs}
+    reached = ts <= final.t
+    return {k: jnp.where(reached, v, jnp.nan) for k, v in ys.items()}
+
+
+def event_record(final: State) -> EventRecord:
+    """The `EventRecord` of the final loop state."""
+    ev = final.ev
+    return EventRecord(
+        t=ev[:, 0],
+        y=ev[:, _EV:],
+        kind=ev[:, 1].astype(jnp.int32),
+        wall=ev[:, 2].astype(jnp.int32),
+        peak_force=ev[:, 3],
+        count=final.n_events,
+        open_peak_force=final.peak,
+        rest_time=final.rest_time,
+    )
+
+
+def _count_at_or_before(ts, t):
+    """How many of the sorted save times `ts` are ≤ t: a binary search, ⌈log2(len + 1)⌉
+    iterations."""
+    ts, t = jax.lax.stop_gradient(ts), jax.lax.stop_gradient(t)
+
+    def body(state):
+        lo, hi = state
+        mid = (lo + hi) // 2
+        right = ts[jnp.minimum(mid, ts.shape[0] - 1)] <= t
+        return jnp.where(right, mid + 1, lo), jnp.where(right, hi, mid)
+
+    start = (jnp.array(0), jnp.array(ts.shape[0]))
+    return jax.lax.while_loop(lambda state: state[0] < state[1], body, start)[0]
+
+
+def _rows_of_times(rec, n_rec, n_ts):
+    """The recorded row that holds each save time. Rows hold consecutive runs of save
+    times (column 3: the index of a row's first one), so marking where each run starts
+    and counting the marks gives every time its row."""
+    rows = rec.shape[0]
+    starts = jax.lax.stop_gradient(rec[1:, 3]).astype(jnp.int32)
+    later = jnp.arange(1, rows) < n_rec
+    marks = jnp.zeros(n_ts, jnp.int32).at[jnp.where(later, starts, n_ts)].add(1, mode="drop")
+    return _running_sum(marks)
+
+
+def _contact_steps(rec, n_rec, ts, n_sw, step_to):
+    """For each save time: its recorded row, whether that row is a contact, and there the
+    pair's step from the row's start (`step_to(s, row)`; zeros at times in flight).
+
+    On a CPU one sequential scan over the save times (`_contact_steps_sequential`), all
+    in one loop kernel with `use_loop_kernels`; on other platforms vectorized
+    (`_contact_steps_vectorized`). Both give the same numbers.
+    """
+    return jax.lax.platform_dependent(
+        rec,
+        n_rec,
+        ts,
+        cpu=functools.partial(_contact_steps_sequential, n_sw=n_sw, step_to=step_to),
+        default=functools.partial(_contact_steps_vectorized, n_sw=n_sw, step_to=step_to),
+    )
+
+
+def _row_facts(rec, n_sw):
+    """(index of each row's first save time, whether each row is a contact)."""
+    rec = jax.lax.stop_gradient(rec)
+    return rec[:, 3].astype(jnp.int32), jnp.any(rec[:, _REC : _REC + n_sw] != 0, axis=1)
+
+
+def _contact_steps_sequential(rec, n_rec, ts, *, n_sw, step_to):
+    """`_contact_steps` as one scan over the save times: each time's row is the previous
+    time's or the next one (every recorded row holds at least one save time), and a step
+    is taken only at the times in contact."""
+    n = rec.shape[1] - _REC - n_sw
+    firsts, in_contact = _row_facts(rec, n_sw)
+    last = jnp.maximum(n_rec - 1, 0)
+
+    def body(r, s_and_p):
+        s, p = s_and_p
+        r = r + ((r < last) & (firsts[jnp.minimum(r + 1, rec.shape[0] - 1)] <= p))
+        row = jax.lax.dynamic_index_in_dim(rec, r, keepdims=False)
+        y = jax.lax.cond(in_contact[r], lambda: step_to(s, row), lambda: jnp.zeros(n, rec.dtype))
+        return r, (r, in_contact[r], y)
+
+    return jax.lax.scan(body, jnp.zeros((), jnp.int32), (ts, jnp.arange(ts.shape[0])))[1]
+
+
+def _contact_steps_vectorized(rec, n_rec, ts, *, n_sw, step_to, few=64):
+    """`_contact_steps` without a loop over the save times: the rows by
+    `_rows_of_times`, and the times in contact gathered into chunks of `few`, a chunk
+    with none skipped."""
+    n_ts, n = ts.shape[0], rec.shape[1] - _REC - n_sw
+    index = _rows_of_times(rec, n_rec, n_ts)
+    contact = _row_facts(rec, n_sw)[1][index]
+    size = min(n_ts, few)
+    chunks = -(-n_ts // size)
+    count = jnp.cumsum(contact)
+    # The times in contact in order (padding: n_ts, out of range), in chunks.
+    order = jnp.full(chunks * size, n_ts)
+    order = order.at[jnp.where(contact, count - 1, n_ts)].set(jnp.arange(n_ts), mode="drop")
+
+    def chunk(_, idx):
+        def work():
+            i = jnp.minimum(idx, n_ts - 1)
+            return jax.vmap(step_to)(ts[i], rec[index[i]])
+
+        return None, jax.lax.cond(idx[0] < n_ts, work, lambda: jnp.zeros((size, n), rec.dtype))
+
+    y = jax.lax.scan(chunk, None, order.reshape(chunks, size))[1].reshape(-1, n)
+    return index, contact, jnp.where(contact[:, None], y[jnp.clip(count - 1, 0, chunks * size - 1)], 0.0)
+
+
+def _running_sum(values):
+    """`jnp.cumsum` of an integer vector. On a CPU a sequential scan: with loop kernels one
+    compiled loop of a few ns per element, where XLA:CPU's cumsum (reduce-window) is
+    several kernels and ~10 µs for 2001 elements; elsewhere `jnp.cumsum`."""
+
+    def sequential(v):
+        return jax.lax.scan(lambda acc, x: (acc + x, acc + x), jnp.zeros((), v.dtype), v)[1]
+
+    return jax.lax.platform_dependent(values, cpu=sequential, default=jnp.cumsum)
