@@ -50,8 +50,10 @@ import jax.numpy as jnp
 LOGISTIC_SLOPE_MAX = 1.1
 #: The energy must be below the barrier by this relative margin (rounding).
 MARGIN = 1e-6
-#: Newton iterations for Logistic's u σ(u) = q (quadratic convergence from [q, 2q]).
-_NEWTON = 40
+#: Newton iterations for Logistic's u σ(u) = q from u = 1.5q, clipped to [q, 2q]: within
+#: 4e-16 relative after at most 6 for every q in [1e-12, 1e12] (x̂'s residual is bounded
+#: anyway: see `smooth_rest_error`).
+_NEWTON = 8
 
 
 def _logistic_slope(u):

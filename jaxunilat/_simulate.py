@@ -238,7 +238,9 @@ def _solve_impl(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[
         return {name: args.output(name, t, y) for name in outputs}
 
     saveat = dfx.SaveAt(subs=[dfx.SubSaveAt(ts=ts, fn=save_fn), dfx.SubSaveAt(t1=True)])
-    rests = _can_rest(model)
+    # The adaptive solver only: RK4's fixed step is the user's (a diverging run must
+    # fail, not pass through a state that looks at rest).
+    rests = settings.method == "tsit5" and _can_rest(model)
     sol = dfx.diffeqsolve(
         dfx.ODETerm(lambda t, y, args: args.vector_field(t, y)),
         settings.diffrax_solver(),
