@@ -11,10 +11,10 @@ import numpy as np
 from jaxtyping import Array, ArrayLike
 
 from ..internal._validate import float_field, is_concrete
-from . import _rest
+from . import _rest, _rest_smooth
 from ._contact import AbstractContactLaw, ClampedKelvinVoigt, HuntCrossley, KelvinVoigt, rk4_step_limit
 from ._flight import apex_rise, apex_time, fall_time, flight_state, longest_fall, rise_time
-from ._heaviside import AbstractHeaviside, Exact
+from ._heaviside import AbstractHeaviside, Exact, Logistic, Softplus
 from ._model import AbstractModel
 
 #: A closed-form flight whose apex is within this many ulps of the upper wall grazes it
@@ -301,6 +301,41 @@ class Ball(AbstractModel):
             return jnp.zeros((), bool)
         return mask[0] if self.upper is None else mask[0] & ~mask[1]
 
+    @property
+    def can_rest(self) -> bool:
+        """Whether `rest_error` can ever be finite (static): a lower wall, a law and a
+        Heaviside option with a rest criterion. The time-stepping solvers build their rest
+        detection only then."""
+        laws = (KelvinVoigt, ClampedKelvinVoigt, HuntCrossley)
+        return (
+            self.lower is not None
+            and isinstance(self.law, laws)
+            and isinstance(self.heaviside, (Exact, Logistic, Softplus))
+        )
+
+    def _smooth_rest(self, y):
+        """(bound, x̂) of the smoothed rest criterion (`jaxunilat._models._rest_smooth`)."""
+        pos = self.gravity > 0
+        g = jnp.where(pos, self.gravity, 1.0)  # g = 0 never rests: safe unused values
+        hc = isinstance(self.law, HuntCrossley)
+        x_hat, k_min, k_max, r = _rest_smooth.smooth_equilibrium(
+            self.lower,
+            self.upper,
+            self.kappa,
+            self.mass,
+            g,
+            self.heaviside.eps,
+            "softplus" if isinstance(self.heaviside, Softplus) else "logistic",
+            self.law.exponent if hc else None,
+            isinstance(self.law, ClampedKelvinVoigt),
+        )
+        # |A(x̂)| at v = 0 (the drag vanishes) and its rounding, m/s².
+        zero = jnp.zeros_like(x_hat)
+        push = jnp.abs(self.contact_force(x_hat, zero)) / self.mass
+        residual = jnp.abs(push - g) + 16 * jnp.finfo(x_hat.dtype).eps * (push + g)
+        err = _rest_smooth.smooth_rest_error(y[0], y[1], x_hat, k_min, k_max, r, residual, self.gravity)
+        return err, x_hat
+
     def rest_error(self, y: Array, mask: Array, horizon: Array) -> Array:
         """Whether the contact in `mask` can never end, and how well `rest_state` follows it.
 
@@ -317,11 +352,17 @@ class Ball(AbstractModel):
         amplitude about the static deflection, T = `horizon`), never more than 2A (and
         2A for the clamped law while its clamp may act), and for Hunt–Crossley the
         largest distance from the rest state that the energy allows. Other laws: +inf.
+
+        With a smooth Heaviside (the time-stepping solvers only) `mask` is unused: the
+        bound is `jaxunilat._models._rest_smooth`'s, about the smoothed equilibrium, valid for all
+        later times (`horizon` unused).
         """
         x, v = y[0], y[1]
         inf = jnp.full_like(x, jnp.inf)
-        if self.lower is None:
+        if not self.can_rest:
             return inf
+        if self.heaviside.smooth:
+            return self._smooth_rest(y)[0]
         pen = self.lower - x
         if isinstance(self.law, HuntCrossley):
             err = _rest.hunt_crossley_rest_error(
@@ -347,10 +388,14 @@ class Ball(AbstractModel):
         """The state `tau` s after `y` in a contact with the lower wall that never ends
         (`rest_error` finite), within `rest_error`'s bound of the true motion: for
         Kelvin–Voigt and the clamped law the damped oscillator about x = wall − mg/κ in
-        closed form; for Hunt–Crossley the rest state x = wall − (mg/κ)^(1/n), v = 0."""
+        closed form; for Hunt–Crossley the rest state x = wall − (mg/κ)^(1/n), v = 0; with a
+        smooth Heaviside the smoothed rest state (`jaxunilat._models._rest_smooth`), v = 0."""
         x, v = y[0], y[1]
-        if self.lower is None:
-            return y  # never used: without a lower wall `rest_error` is +inf
+        if not self.can_rest:
+            return y  # never used: `rest_error` is +inf
+        if self.heaviside.smooth:
+            x_hat = self._smooth_rest(y)[1]
+            return jnp.stack([x_hat + jnp.zeros_like(x), jnp.zeros_like(v)])
         if isinstance(self.law, HuntCrossley):
             # (g = 0 never rests: a safe g keeps the unused power's derivative finite.)
             g = jnp.where(self.gravity > 0, self.gravity, 1.0)

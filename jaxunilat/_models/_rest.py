@@ -42,6 +42,14 @@ rest is a = k_r g/(2κ) (1/s), has brought b within the tolerance: about ln(δ*/
 seconds of steps. A contact without damping and drag loses no energy: every entry has
 A ≥ mg/κ, and the ball bounces for ever, as the model says.
 
+The time-stepping solver (`solver="tsit5"`) uses the same test through a terminating
+diffrax event: once `Ball.rest_error` of the current state (the contact mask from the
+state's own switches) is within atol + rtol·|y|, the solve stops at the end of that step
+and every later save time, and y1, come from `Ball.rest_state` (the tolerance here bounds
+the closed form's error, not Tsit5's own, which stays as the contract states). A smooth
+switch's force acts everywhere and its rest is not wall − mg/κ: its criterion is in
+`jaxunilat._models._rest_smooth`.
+
 Every function is plain `jax.numpy` (no control flow on values), so it is vmapped and
 differentiated like the rest of the event loop: the rest position wall − mg/κ (or
 wall − δ*) carries the derivatives in κ, the mass and g.

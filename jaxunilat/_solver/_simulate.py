@@ -181,6 +181,44 @@ def _finish(ys, y1, status, settings, throw, ts, stats, events=None, checks=()):
     )
 
 
+def _can_rest(model) -> bool:
+    """Whether the time-stepping solve looks for a ball at rest (static): the model has
+    a rest criterion (on the class: see `simulate`'s check of `switches`) that can hold."""
+    return hasattr(type(model), "rest_error") and bool(getattr(model, "can_rest", True))
+
+
+def _rest_event(settings: SolverSettings, t1):
+    """A terminating diffrax event: the contact provably never ends and the model's
+    closed form (`rest_state`) follows it to t1 within the tolerance, atol + rtol·|y|
+    (the event mode's test, in the model's amplitude units, m for the ball)."""
+
+    def resting(t, y, args, **kwargs):
+        y = jax.lax.stop_gradient(y)
+        bound = args.rest_error(y, args.switches(y) > 0, t1 - t)
+        return bound <= settings.atol + settings.rtol * jnp.max(jnp.abs(y))
+
+    return dfx.Event(resting)
+
+
+def _hold_rest(model, sol, ts, t1, save_fn, ys, y1):
+    """After a rest event at t_e (from state y_e): the save times after t_e, and y1,
+    from the closed form `model.rest_state(y_e, t − t_e)` (diffrax leaves them unfilled).
+
+    **Returns:** (ys, y1, ok): ok is true for a run that ended at t1 or at a rest event.
+    """
+    held = sol.result == dfx.RESULTS.event_occurred
+    t_e, y_e = sol.ts[1][0], sol.ys[1][0]
+    after = held & (ts > t_e)
+    tau = jnp.where(after, ts - t_e, 0.0)  # safe: the closed form is unused before t_e
+    rest = jax.vmap(lambda s, dt: save_fn(s, model.rest_state(y_e, dt), model))(ts, tau)
+    ys = {
+        name: jnp.where(after.reshape(after.shape + (1,) * (value.ndim - 1)), rest[name], value)
+        for name, value in ys.items()
+    }
+    y1 = jnp.where(held, model.rest_state(y_e, jnp.where(held, t1 - t_e, 0.0)), y1)
+    return ys, y1, (sol.result == dfx.RESULTS.successful) | held
+
+
 def _solve_impl(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[str, ...], throw: bool):
     _TRACES["simulate"] += 1
     checks = _input_checks(model, y0, t0, t1, ts, settings)
@@ -200,6 +238,9 @@ def _solve_impl(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[
         return {name: args.output(name, t, y) for name in outputs}
 
     saveat = dfx.SaveAt(subs=[dfx.SubSaveAt(ts=ts, fn=save_fn), dfx.SubSaveAt(t1=True)])
+    # The adaptive solver only: RK4's fixed step is the user's (a diverging run must
+    # fail, not pass through a state that looks at rest).
+    rests = settings.method == "tsit5" and _can_rest(model)
     sol = dfx.diffeqsolve(
         dfx.ODETerm(lambda t, y, args: args.vector_field(t, y)),
         settings.diffrax_solver(),
@@ -212,13 +253,16 @@ def _solve_impl(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[
         stepsize_controller=settings.controller(),
         adjoint=settings.adjoint(),
         max_steps=settings.max_steps,
+        event=_rest_event(settings, t1) if rests else None,
         throw=False,
     )
     ys, y1 = sol.ys[0], sol.ys[1][0]
+    ok = sol.result == dfx.RESULTS.successful
+    if rests:
+        ys, y1, ok = _hold_rest(model, sol, ts, t1, save_fn, ys, y1)
     finite = jnp.all(jnp.isfinite(y1))
     for value in ys.values():
         finite = finite & jnp.all(jnp.isfinite(value))
-    ok = sol.result == dfx.RESULTS.successful
     steps = sol.result == dfx.RESULTS.max_steps_reached
     status = jnp.where(
         ok,
