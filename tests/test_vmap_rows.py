@@ -78,28 +78,38 @@ def test_paths_equal_per_row_runs(solver, monkeypatch):
     np.testing.assert_array_equal(rows.ts, np.broadcast_to(one.ts, rows.ts.shape))
 
 
-def test_grad_under_vmap_equals_per_row_grads(path):
-    per_row = np.array([jax.grad(_loss)(k) for k in KAPPAS])
+@pytest.fixture
+def rows(monkeypatch):
+    """The row rule only: derivatives take the plain solve's own rule on it (so batch in
+    lockstep, as the batch path does: that path is the plain solve itself)."""
+    monkeypatch.setenv(ENV, "rows")
+
+
+def test_grad_under_vmap_equals_per_row_grads(rows):
+    grad = jax.jit(jax.grad(_loss))
+    per_row = np.array([grad(k) for k in KAPPAS])
     assert np.all(per_row != 0)
-    inside = jax.jit(jax.vmap(jax.grad(_loss)))(KAPPAS)
-    outside = jax.jit(jax.grad(lambda ks: jnp.sum(jax.vmap(_loss)(ks))))(KAPPAS)
-    np.testing.assert_allclose(inside, per_row, rtol=1e-9, atol=0)
-    np.testing.assert_allclose(outside, per_row, rtol=1e-9, atol=0)
-    # The value and its gradient together (a jax.vjp of the row-wise evaluation).
-    values, grads = jax.vmap(jax.value_and_grad(_loss))(KAPPAS)
+    # The value and its gradient (the custom_vjp's forward pass) inside vmap ...
+    values, inside = jax.jit(jax.vmap(jax.value_and_grad(_loss)))(KAPPAS)
     np.testing.assert_allclose(values, [_loss(k) for k in KAPPAS], rtol=1e-12, atol=0)
-    np.testing.assert_allclose(grads, per_row, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(inside, per_row, rtol=1e-9, atol=0)
+    # ... and the gradient of a vmapped loss.
+    outside = jax.jit(jax.grad(lambda ks: jnp.sum(jax.vmap(_loss)(ks))))(KAPPAS)
+    np.testing.assert_allclose(outside, per_row, rtol=1e-9, atol=0)
 
 
-def test_forward_mode_under_vmap_equals_per_row(path):
+def test_forward_mode_under_vmap_equals_per_row(rows):
     loss = lambda k: _loss(k, "forward")  # noqa: E731
-    per_row = np.array([jax.jacfwd(loss)(k) for k in KAPPAS])
-    np.testing.assert_allclose(per_row, [jax.grad(_loss)(k) for k in KAPPAS], rtol=1e-6)
+    jac = jax.jit(jax.jacfwd(loss))
+    per_row = np.array([jac(k) for k in KAPPAS])
+    assert np.all(per_row != 0)
     np.testing.assert_allclose(jax.vmap(jax.jacfwd(loss))(KAPPAS), per_row, rtol=1e-9, atol=0)
     np.testing.assert_allclose(np.diag(jax.jacfwd(jax.vmap(loss))(KAPPAS)), per_row, rtol=1e-9, atol=0)
     # Reverse mode through a forward-mode solve still says what to do, under vmap too.
     with pytest.raises(RuntimeError, match="autodiff='forward' differentiates in forward mode only"):
         jax.grad(lambda ks: jnp.sum(jax.vmap(loss)(ks)))(KAPPAS)
+    with pytest.raises(RuntimeError, match="autodiff='forward' differentiates in forward mode only"):
+        jax.grad(loss)(KAPPAS[0])
 
 
 def test_runtime_checks_per_row(path):
