@@ -244,7 +244,9 @@ def _user_notes(result: dict, out: dict) -> dict:
         vm = user["vmap_against_rows"]
         notes["P7"] = (
             f"missed: {1e6 * vm['vmap_per_row_s']:.1f} us/row vmapped against {1e6 * vm['sequential_per_row_s']:.1f} "
-            "us/row one by one. Vmapped rows run in lockstep until the slowest row's last step, every cond "
+            f"us/row one by one ({vm.get('batching', 'batch')} rule under vmap; on a CPU simulate's rule "
+            "runs vmapped rows one by one, JAXUNILAT_VMAP=batch or another backend batches them). "
+            "Vmapped rows run in lockstep until the slowest row's last step, every cond "
             f"runs all its branches (the step loop's: {branches}), and a vmapped loop touches every row's "
             "bytes per step, so a large enough batch (N x a row's tens of KiB > 1 MiB) is no longer one "
             "kernel under use_loop_kernels(). What would close it: fewer, cheaper branches in the step "

@@ -6,7 +6,10 @@ rtol = atol = 1e-10, 201 save times over [0, 1] s, every other option at its def
 
 - P7 (`vmap_against_rows`): `jax.jit(jax.vmap(f))` over N values of κ (±20 % about
   Table 1's) against `jaxunilat.sweep(f, kappas, batch_size=1)`, the rows one by one,
-  unbatched, both on the same single device; the ratio of their warm medians.
+  unbatched, both on the same single device; the ratio of their warm medians. On a CPU
+  `simulate`'s batching rule runs the vmapped rows one by one too (`lax.map`, see
+  `_batching`; `batching` in the result says which rule ran), so the ratio is about 1;
+  with `JAXUNILAT_VMAP=batch` (the GPU rule) the rows run in lockstep, about 2x slower.
 - P8 (`reverse_against_forward`): `jax.jit(jax.grad(loss))` of a misfit (mean square of
   the trace against data plus mean square of the impact times against the data's) in
   (κ, k_r), against `jax.jit(loss)`, one forward solve of the same run; warm medians.
@@ -113,6 +116,7 @@ def vmap_against_rows(size, timed_together, log) -> dict:
     """P7: `jax.jit(jax.vmap(f))` against `sweep(f, ..., batch_size=1)` on one device."""
     import jax
 
+    from .._solver._batching import batching_mode
     from .._solver._sweep import sweep
 
     n = size.user_n
@@ -134,6 +138,8 @@ def vmap_against_rows(size, timed_together, log) -> dict:
         "n": n,
         "kappa_range": [float(kappas[0]), float(kappas[-1])],
         "device": str(device),
+        # simulate's rule under vmap: "rows" (lax.map, CPU) or "batch" (lockstep).
+        "batching": batching_mode(),
         "vmap": "jax.jit(jax.vmap(f))(kappas)",
         "sequential": "jaxunilat.sweep(f, kappas, batch_size=1, devices=[device])",
         "vmap_s": vm.median,
@@ -150,7 +156,8 @@ def vmap_against_rows(size, timed_together, log) -> dict:
     }
     log(
         f"  P7 N = {n}: jit(vmap(f)) {1e6 * out['vmap_per_row_s']:.1f} us/row, sweep(batch_size=1) "
-        f"{1e6 * out['sequential_per_row_s']:.1f} us/row on {out['device']}: ratio {out['ratio']:.2f} "
+        f"{1e6 * out['sequential_per_row_s']:.1f} us/row on {out['device']} ({out['batching']} rule): "
+        f"ratio {out['ratio']:.2f} "
         f"(compile {out['vmap_compile_s']:.1f} s / {out['sequential_compile_s']:.1f} s)"
     )
     return out

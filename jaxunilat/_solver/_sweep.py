@@ -157,7 +157,8 @@ def sweep(
       after another, unbatched: each row's loop stops at its own last step (no
       lockstep behind the slowest row) and, after `use_loop_kernels()`, compiles into
       one CPU kernel. On a CPU that is the fastest for event-mode sweeps (README,
-      Performance); on a GPU, vmap.
+      Performance); on a GPU, vmap. On a CPU `simulate`'s batching rule runs its vmapped
+      rows one by one anyway (`_batching.py`), so there all three run them alike.
 
     **Returns:** `fn`'s outputs stacked along a leading batch axis of the input's
     length. The batch is padded to a multiple of the device count with copies of its

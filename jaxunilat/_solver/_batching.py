@@ -1,0 +1,134 @@
+"""How `jax.vmap` batches a solve: one row at a time on a CPU, in lockstep elsewhere.
+
+JAX batches a `while` loop by running every row in lockstep: the loop runs until the
+last row is done, each iteration executes every branch of its `cond`/`switch` for all
+rows and selects per row, and every buffer write touches all rows. The event mode's
+loop is mostly branches (flight or contact, closed form or Runge–Kutta, event location,
+accept or reject), and the adaptive solvers' rows take different numbers of steps, so
+on a CPU, which has no wide parallel hardware to spend on the extra work, a vmapped
+solve costs about twice as much per row as the same rows one after another (each row
+stops at its own last step and runs only its own branch). On a GPU lockstep batching is
+what fills the device.
+
+`rowwise` therefore gives the solve a custom batching rule
+(`jax.custom_batching.custom_vmap`): under `jax.vmap` it runs `jax.lax.map` over the
+batched rows, the unbatched arguments shared, so `jax.jit(jax.vmap(f))` costs what
+`sweep(f, ..., batch_size=1)` does. Nested `vmap`s nest the maps (the map's body calls
+the rule's function again, so an outer `vmap` meets the rule too). Which rule applies is
+a static choice made when the solve is traced, `batching_mode()`: `"rows"` on a CPU,
+`"batch"` (plain `jax.vmap`, the solve left unwrapped) on other backends; the
+environment variable `JAXUNILAT_VMAP` (`rows` or `batch`) forces one, for tests and
+comparisons.
+
+Autodiff: a `custom_vmap` function has a JVP rule (the JVP of its rule), but JAX can
+neither partially evaluate nor transpose it, so it supports forward mode only.
+
+- `autodiff="forward"`: the `custom_vmap` function as is. `jax.jvp` and `jax.jacfwd`
+  inside `jax.vmap` run row by row; `jax.vmap` of `jax.jacfwd` batches in lockstep
+  (its inner tangent `vmap` meets the rule first, with no batched primal: the rule
+  then calls the plain solve, since calling itself there would recurse).
+- `autodiff="reverse"`: a `jax.custom_vjp` around it whose forward and backward
+  passes are the plain solve's own `jax.vjp` (the checkpointed loop's, so no extra
+  solve). Evaluation runs row by row; `jax.grad` and `jax.vjp`, inside or outside
+  `jax.vmap`, batch the differentiated solve in lockstep as before (their values are
+  unchanged), because residuals of a `custom_vmap` function cannot carry the
+  pullback's structure across the rows' traces. Reverse mode already refuses
+  `jax.jvp` (the checkpointed loop is a `custom_vjp`), so nothing is lost.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+
+import jax
+
+#: The environment variable that forces a batching rule: "rows" or "batch".
+ENV = "JAXUNILAT_VMAP"
+MODES = ("rows", "batch")
+
+
+def batching_mode() -> str:
+    """The batching rule for solves traced now: `JAXUNILAT_VMAP` if set, else `"rows"`
+    on a CPU backend and `"batch"` on others."""
+    forced = os.environ.get(ENV, "")
+    if forced not in _RESOLVED:
+        mode = forced.strip().lower()
+        if mode and mode not in MODES:
+            raise ValueError(f"{ENV} = {forced!r} is not supported; valid: {', '.join(MODES)} (or unset)")
+        _RESOLVED[forced] = mode or ("rows" if jax.default_backend() == "cpu" else "batch")
+    return _RESOLVED[forced]
+
+
+#: `batching_mode()` by the value of `JAXUNILAT_VMAP` (it runs on every `simulate` call).
+_RESOLVED: dict[str, str] = {}
+
+
+def rowwise(fn: Callable) -> Callable:
+    """`fn` (positional array pytrees to a pytree) whose `jax.vmap` is a `lax.map` over rows."""
+
+    def call(*args):
+        # The rule sees the flat leaves: JAX's JVP of a `custom_vmap` rule mistakes a
+        # None in the arguments (an unset option) for a leaf.
+        leaves, tree = jax.tree_util.tree_flatten(args)
+        return _flat(fn, tree)(*leaves)
+
+    return call
+
+
+def _flat(fn: Callable, tree) -> Callable:
+    def flat_fn(*leaves):
+        return fn(*jax.tree_util.tree_unflatten(tree, leaves))
+
+    wrapped = jax.custom_batching.custom_vmap(flat_fn)
+
+    @wrapped.def_vmap
+    def rule(axis_size, in_batched, *leaves):
+        del axis_size
+        if not any(in_batched):
+            # Only tangents batched (JAX's JVP of this rule): the plain function, which
+            # JAX then batches over the tangents alone.
+            out = flat_fn(*leaves)
+            return out, jax.tree_util.tree_map(lambda _: False, out)
+        rows = [leaf for leaf, batched in zip(leaves, in_batched, strict=True) if batched]
+
+        def row(one):
+            it = iter(one)
+            return wrapped(
+                *(next(it) if batched else leaf for leaf, batched in zip(leaves, in_batched, strict=True))
+            )
+
+        out = jax.lax.map(row, rows)
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+
+    return wrapped
+
+
+def rowwise_differentiable(fn: Callable, autodiff: str) -> Callable:
+    """`rowwise(fn)` for evaluation; for derivatives `fn`'s own: its `jax.vjp` for
+    `autodiff="reverse"`, its `jax.jvp` for `"forward"` (batched in lockstep)."""
+    primal = rowwise(fn)
+    if autodiff == "forward":
+
+        @jax.custom_jvp
+        def solve_forward(*args):
+            return primal(*args)
+
+        @solve_forward.defjvp
+        def tangent(primals, tangents):
+            return jax.jvp(fn, primals, tangents)
+
+        return solve_forward
+
+    @jax.custom_vjp
+    def solve(*args):
+        return primal(*args)
+
+    def forward(*args):
+        return jax.vjp(fn, *args)
+
+    def backward(pullback, cotangent):
+        return pullback(cotangent)
+
+    solve.defvjp(forward, backward)
+    return solve
