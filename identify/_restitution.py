@@ -40,7 +40,7 @@ import numpy as np
 
 import jaxunilat
 from jaxunilat import Status
-from jaxunilat.internal import EXIT, check_choice, check_finite, check_range
+from jaxunilat.internal import check_choice, check_finite, check_range
 
 # -- per-bounce restitution from onset times ------------------------------------------------
 
@@ -264,7 +264,7 @@ def _impact(law: str, kappa, k_r, speed, mass, gravity, rtol):
         throw=False,
     )
     ev = sol.events
-    is_exit = (ev.kind == EXIT) & (jnp.arange(ev.t.shape[0]) < ev.count)
+    is_exit = (ev.kind == jaxunilat.EventRecord.EXIT) & (jnp.arange(ev.t.shape[0]) < ev.count)
     found = jnp.any(is_exit)
     i = jnp.argmax(is_exit)
     # No exit: a contact that held the ball to the horizon (e = 0), unless the run failed.

@@ -138,3 +138,21 @@ def test_no_function_is_over_150_lines():
                     if lines > 150:
                         long.append(f"{path.relative_to(_ROOT)}:{node.lineno}: {node.name} ({lines} lines)")
     assert long == []
+
+
+def test_the_core_does_not_depend_on_its_studies_figures_or_command_line():
+    """Dependencies run downwards: `_models` and `internal` import no other part of
+    jaxunilat but `internal`; `_solver` imports only `_models` and `internal`."""
+    allowed = {
+        "_models": {"_models", "internal"},
+        "internal": {"internal"},
+        "_solver": {"_solver", "_models", "internal"},
+    }
+    offenders = []
+    for part, ok in allowed.items():
+        for path in sorted((_ROOT / "jaxunilat" / part).rglob("*.py")):
+            for line, name in _imports(path):
+                parts = name.split(".")
+                if parts[0] == "jaxunilat" and (len(parts) < 2 or parts[1] not in ok):
+                    offenders.append(f"{path.relative_to(_ROOT)}:{line}: {name}")
+    assert offenders == []

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from typing import ClassVar
 
 import equinox as eqx
 import equinox.internal as eqxi
@@ -21,7 +22,7 @@ import jax.numpy as jnp
 from jaxtyping import Array
 
 from ._event_pieces import erk_step
-from ._event_state import _EV, _REC, Piece, Problem, State
+from ._event_state import _EV, _REC, ENTRY, EXIT, EXTREMUM, Piece, Problem, State
 
 
 class EventRecord(eqx.Module):
@@ -32,7 +33,8 @@ class EventRecord(eqx.Module):
     - `t`: event times, s (padding: +inf).
     - `y`: the state at each event.
     - `kind`: 1 = contact entry, 2 = contact exit, 3 = extremum of the observable
-      (an apex in flight, the deepest point in contact); 0 = padding.
+      (an apex in flight, the deepest point in contact); 0 = padding. The codes are
+      also `EventRecord.ENTRY`, `EventRecord.EXIT` and `EventRecord.EXTREMUM`.
     - `wall`: the wall's index (lower first) for entries, exits and deepest points;
       −1 for an apex in flight.
     - `peak_force`: for exits, the largest |contact force| seen during that
@@ -52,6 +54,11 @@ class EventRecord(eqx.Module):
     count: Array
     open_peak_force: Array
     rest_time: Array
+
+    #: The `kind` codes.
+    ENTRY: ClassVar[int] = ENTRY
+    EXIT: ClassVar[int] = EXIT
+    EXTREMUM: ClassVar[int] = EXTREMUM
 
 
 def record_event(problem: Problem, state: State, pred, t, y, kind, wall, peak) -> State:

@@ -2,7 +2,7 @@
 
 Argument validation with messages that name the parameter, the value and the valid
 range; the output-path checks every command runs before any work; the command line's
-error types and exit codes; the event record's kind codes. `identify` imports only
+error types and exit codes. `identify` imports only
 jaxunilat's public API and this module (a test checks it), so the two packages depend
 one way.
 
@@ -10,7 +10,6 @@ No stability promise: these names serve the project's own packages and may chang
 between releases.
 """
 
-from .._solver._event import ENTRY as ENTRY, EXIT as EXIT, EXTREMUM as EXTREMUM
 from ._errors import EXIT_OK as EXIT_OK, PROG as PROG, RunError as RunError, UsageError as UsageError
 from ._io import check_output_dir as check_output_dir, check_output_paths as check_output_paths
 from ._validate import (
