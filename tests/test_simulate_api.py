@@ -97,13 +97,14 @@ def test_grad_through_smooth_heaviside_matches_finite_difference():
 
 
 def test_rk4_beyond_stability_reports_nonfinite():
-    """A law with no known step limit (Hunt-Crossley): RK4 diverges, status NONFINITE."""
+    """A step beyond the limit, run anyway (`allow_coarse_dt`): RK4 diverges, status NONFINITE."""
     ball = jaxunilat.Ball(kappa=1e6, k_r=None, law=jaxunilat.HuntCrossley(1.5))
-    sol = rk4(ball, PAPER_Y0, 2.0, 3e-3)
+    kwargs = dict(solver="rk4", dt=3e-3, allow_coarse_dt=True, samples=2, outputs=("x",))
+    sol = jaxunilat.simulate(ball, PAPER_Y0, 2.0, throw=False, **kwargs)
     assert int(sol.status) == jaxunilat.Status.NONFINITE
     assert not sol.ok
     with pytest.raises(RuntimeError, match="dt"):
-        jaxunilat.simulate(ball, PAPER_Y0, 2.0, solver="rk4", dt=3e-3, samples=2, outputs=("x",))
+        jaxunilat.simulate(ball, PAPER_Y0, 2.0, **kwargs)
 
 
 def test_rk4_step_limit_is_a_tenth_of_the_contact_time():
@@ -311,3 +312,29 @@ def test_a_time_stepping_solver_out_of_steps_points_to_the_event_mode():
     for method in ("tsit5",):
         assert "solver='event'" in failure_hints(method)["max_steps"]
     assert "solver='event'" not in failure_hints("event")["max_steps"]
+
+
+def test_rk4_refuses_a_step_beyond_hunt_crossleys_limit():
+    """Hunt–Crossley stiffens with depth, so its RK4 limit comes from the deepest
+    penetration the initial energy allows: a tenth of π/ω there, a little below the
+    closed-form undamped contact time at the largest possible impact speed. A step of
+    5 s (which used to diverge to |x| ~ 1e15 m with status SUCCESS) is refused, as a
+    ValueError with concrete values and as INVALID_INPUT with a traced dt."""
+    import math
+
+    ball = jaxunilat.Ball.table1(2, law=jaxunilat.HuntCrossley(1.5))
+    y0 = np.asarray(ball.paper_initial_state())
+    limit, t_c = (float(v) for v in ball.rk4_step_limit(np, y0))
+    drop = float(y0[0]) - float(ball.lower)
+    speed = math.sqrt(float(y0[1]) ** 2 + 2 * float(ball.gravity) * drop)
+    closed = jaxunilat.hunt_crossley_contact_time(float(ball.kappa), float(ball.mass), speed, 1.5)
+    assert 0.6 * closed < t_c < closed and limit <= t_c / 10
+    with pytest.raises(ValueError, match=r"dt = 5 s is beyond rk4's stability limit.*deepest penetration"):
+        jaxunilat.simulate(ball, y0, 0.5, solver="rk4", dt=5.0)
+    status = jax.jit(
+        lambda dt: (
+            jaxunilat.simulate(ball, y0, 0.5, solver="rk4", dt=dt, max_steps=60_000, throw=False).status
+        )
+    )
+    assert int(status(5.0)) == jaxunilat.Status.INVALID_INPUT
+    assert int(status(0.9 * limit)) == jaxunilat.Status.SUCCESS

@@ -12,7 +12,14 @@ from jaxtyping import Array, ArrayLike
 
 from ..internal._validate import float_field, is_concrete
 from . import _rest, _rest_smooth
-from ._contact import AbstractContactLaw, ClampedKelvinVoigt, HuntCrossley, KelvinVoigt, rk4_step_limit
+from ._contact import (
+    AbstractContactLaw,
+    ClampedKelvinVoigt,
+    HuntCrossley,
+    KelvinVoigt,
+    hunt_crossley_step_limit,
+    rk4_step_limit,
+)
 from ._flight import apex_rise, apex_time, fall_time, flight_state, longest_fall, rise_time
 from ._heaviside import AbstractHeaviside, Exact, Logistic, Softplus
 from ._model import AbstractModel
@@ -156,13 +163,43 @@ class Ball(AbstractModel):
             "a ball resting in contact, is allowed)"
         )
 
-    def rk4_step_limit(self, xp=jnp):
-        """The largest RK4 step, s, and the contact time, s: a tenth of the Kelvin–Voigt
-        contact time t_c = π/ω_d of κ, k_r and m (see `jaxunilat._models._contact.rk4_step_limit`).
-        `None` without walls, and for `HuntCrossley` (its stiffness depends on depth)."""
-        if self.num_switches == 0 or not isinstance(self.law, (KelvinVoigt, ClampedKelvinVoigt)):
+    def rk4_step_limit(self, xp=jnp, y0=None):
+        """The largest RK4 step, s, and the contact's time scale t_c, s.
+
+        Kelvin–Voigt and the clamped law: a tenth of the contact time t_c = π/ω_d of κ,
+        k_r and m (see `jaxunilat._models._contact.rk4_step_limit`). Hunt–Crossley
+        (n ≥ 1), given the initial state `y0` = (x0 m, v0 m/s): a tenth of π/ω at the
+        deepest penetration the initial energy allows (see
+        `jaxunilat._models._contact.hunt_crossley_step_limit`). `None` without walls, and
+        for Hunt–Crossley without `y0`.
+        """
+        if self.num_switches == 0:
             return None
-        return rk4_step_limit(self.kappa, self.k_r, self.mass, xp)
+        if isinstance(self.law, (KelvinVoigt, ClampedKelvinVoigt)):
+            return rk4_step_limit(self.kappa, self.k_r, self.mass, xp)
+        if not isinstance(self.law, HuntCrossley) or y0 is None:
+            return None
+        return hunt_crossley_step_limit(
+            self.kappa, self.k_r, self.mass, self.gravity, self._speed_bound(y0, xp), self.law.exponent, xp
+        )
+
+    def _speed_bound(self, y0, xp):
+        """An upper bound on the ball's speed at any wall, m/s: its energy at `y0`
+        (kinetic, gravity's down to the lower wall, and a start's stored contact
+        energy) cannot grow (damping and drag only remove it)."""
+        x0, v0 = y0[0], y0[1]
+        n1 = self.law.exponent + 1.0
+        speed2 = v0 * v0
+        for depth in (
+            (self.lower - x0) if self.lower is not None else None,
+            (x0 - self.upper) if self.upper is not None else None,
+        ):
+            if depth is not None:
+                pen = xp.maximum(depth, 0.0)
+                speed2 = speed2 + 2.0 * self.kappa * pen**n1 / (n1 * self.mass)
+        if self.lower is not None:
+            speed2 = speed2 + 2.0 * xp.maximum(self.gravity, 0.0) * xp.maximum(x0 - self.lower, 0.0)
+        return xp.sqrt(speed2)
 
     # -- physics ------------------------------------------------------------------
 

@@ -248,7 +248,7 @@ class Coupling(AbstractModel):
         """φ(t) = b[c t − (1 − e^(−at))/a], rad, with φ(0) = 0."""
         return self.b * (self.c * t + jnp.expm1(-self.a * t) / self.a)
 
-    def rk4_step_limit(self, xp=jnp):
+    def rk4_step_limit(self, xp=jnp, y0=None):
         """The largest RK4 step, s, and the joint's contact time, s: a tenth of the
         Kelvin–Voigt contact time of κ, the damping k_r + h and the contact mass J_t/l
         (see `jaxunilat._models._contact.rk4_step_limit`). `None` for `HuntCrossley`."""

@@ -61,9 +61,10 @@ class AbstractModel(eqx.Module):
         calls it with y0 as a float64 array."""
         del y0
 
-    def rk4_step_limit(self, xp=jnp) -> tuple[Array, Array] | None:
+    def rk4_step_limit(self, xp=jnp, y0=None) -> tuple[Array, Array] | None:
         """The largest step `simulate(solver="rk4")` accepts, s, and the contact time
         it derives from, s (see `jaxunilat._models._contact.rk4_step_limit`); `None` where the
-        model has no known limit. `xp`: `jax.numpy`, or `numpy` for concrete values."""
-        del xp
+        model has no known limit. `xp`: `jax.numpy`, or `numpy` for concrete values;
+        `y0`: the initial state, for limits that depend on the energy."""
+        del xp, y0
         return None

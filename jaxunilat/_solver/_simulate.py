@@ -144,7 +144,7 @@ def _input_checks(model, y0, t0, t1, ts, settings: SolverSettings) -> list[tuple
         if value is not None:
             checks.append(runtime_check(name, value, lo=0.0, lo_open=True, unit="s"))
     if settings.method == "rk4" and not settings.allow_coarse_dt:
-        limit = model.rk4_step_limit(jnp)
+        limit = model.rk4_step_limit(jnp, y0)
         if limit is not None:
             checks.append(
                 (
@@ -447,7 +447,7 @@ def simulate(
         allow_coarse_dt=allow_coarse_dt,
     )
     if solver == "rk4" and not allow_coarse_dt:
-        _check_rk4_step(model, dt)
+        _check_rk4_step(model, dt, y0)
     return _run(model, y0, t0, t1, ts, settings, outputs, bool(throw))
 
 
@@ -532,13 +532,18 @@ def _is_concrete_tree(tree) -> bool:
     return all(is_concrete(leaf) for leaf in jax.tree_util.tree_leaves(tree))
 
 
-def _check_rk4_step(model, dt) -> None:
+def _stiffens(law) -> bool:
+    """Whether a contact law's stiffness grows with depth (Hunt–Crossley)."""
+    return type(law).__name__ == "HuntCrossley"
+
+
+def _check_rk4_step(model, dt, y0) -> None:
     """Raise `ValueError` when a concrete RK4 step `dt` exceeds the model's limit
     (traced values are checked at run time: `Status.INVALID_INPUT`)."""
-    if not (is_concrete(dt) and _is_concrete_tree(model)):
+    if not (is_concrete(dt) and is_concrete(y0) and _is_concrete_tree(model)):
         return
     # On the host: NumPy copies of the leaves (no device dispatch per operation).
-    found = jax.tree_util.tree_map(np.asarray, model).rk4_step_limit(np)
+    found = jax.tree_util.tree_map(np.asarray, model).rk4_step_limit(np, np.asarray(y0))
     if found is None:
         return
     limit, t_c = (float(v) for v in found)
@@ -546,9 +551,14 @@ def _check_rk4_step(model, dt) -> None:
     if not step > limit:
         return
     if math.isfinite(t_c) and limit == t_c / RK4_STEPS_PER_CONTACT:
-        why = f"a tenth of the contact time t_c = pi/omega_d = {t_c:.3g} s"
+        form = (
+            "pi/omega_d"
+            if getattr(model, "law", None) is None or not _stiffens(model.law)
+            else ("pi/omega at the deepest penetration the initial energy allows")
+        )
+        why = f"a tenth of the contact time t_c = {form} = {t_c:.3g} s"
     else:
-        why = "the time scale 1/|lambda| of the overdamped contact's fastest mode"
+        why = "the time scale of the contact's damping (1/|lambda| of its fastest mode)"
     raise ValueError(
         f"dt = {step:g} s is beyond rk4's stability limit for this contact; valid range is "
         f"(0, {limit:.3g}] s ({why}); use dt <= {limit:.3g} s, or solver='tsit5' or solver='event' "
