@@ -185,6 +185,15 @@ def regenerate():
     print(f"wrote {PATH} ({os.path.getsize(PATH) / 1024:.0f} KiB)")
 
 
+@pytest.fixture(autouse=True)
+def _lockstep_vmap(monkeypatch):
+    """The reference predates `simulate`'s row-by-row `jax.vmap` rule on a CPU, whose
+    last bits differ from lockstep batching (`jax.jacfwd` maps the tangents with vmap);
+    the engine is compared under the lockstep rule it was recorded with
+    (`tests/test_vmap_rows.py` checks the row rule against per-row runs)."""
+    monkeypatch.setenv("JAXUNILAT_VMAP", "batch")
+
+
 @pytest.fixture(scope="module")
 def reference():
     with np.load(PATH) as data:
@@ -220,6 +229,7 @@ if __name__ == "__main__":
     if sys.argv[1:] != ["--regenerate"]:
         sys.exit("usage: python tests/test_engine_bitwise.py --regenerate")
     os.environ["JAXUNILAT_NO_CACHE"] = "1"
+    os.environ["JAXUNILAT_VMAP"] = "batch"  # the rule the reference was recorded with
     jax.config.update("jax_enable_x64", True)
     jaxunilat.use_loop_kernels()  # as tests/conftest.py does: the configuration the suite runs
     regenerate()

@@ -97,6 +97,7 @@ def test_event_loop_compiles_into_one_kernel(options):
         settings,
         ("x",),
         True,
+        "rows",
     )
     hlo = lowered.compile().as_text()
     entry = _entry_ops(hlo)
