@@ -3,7 +3,7 @@
 The goals (targets in `GOALS`, listed in README.md, "Performance"): P1, P2 ratios
 against the best peer in the same run; P3 trajectories per second (and the ratio
 against a scipy loop); P4 gradient / forward; P5 compile time. P7–P9 are measured on
-code as users write it (`_bench_user`): P7 plain `jax.jit(jax.vmap(f))` against rows one
+code as users write it (`_user.py`): P7 plain `jax.jit(jax.vmap(f))` against rows one
 by one, P8 `jax.grad` against a forward solve, P9 the command line's second run against
 its first. There is no P6. Where a goal is missed, `notes` says why and what would close
 it, from the run's own figures.
@@ -121,7 +121,7 @@ def goals(result: dict) -> dict:
 
 
 def user_goals(user: dict) -> dict:
-    """P7–P9 from the `user` section (`_bench_user`): value, target, met, what was measured
+    """P7–P9 from the `user` section (`_user.py`): value, target, met, what was measured
     and how to reproduce it."""
     vm, grad, cli = user["vmap_against_rows"], user["reverse_against_forward"], user["command_line"]
     code = "the Python in bench.json's user.code"

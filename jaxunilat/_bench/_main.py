@@ -9,11 +9,11 @@ repeated runs after a warm-up call (at least `Size.repeats`, more for fast calls
 `Size.min_time_s` is spent); the warm-up's extra time is the compile time.
 
 `run_bench(size)` returns the `bench.json` dictionary; the `jaxunilat bench` command
-(`_cli_bench.py`) writes it with the figures (`_bench_plot.py`). The peers and the
-reference are in `_bench_peers.py`, the throughput scene and the sharded sweep's timing in
-`_bench_scale.py`, the goals P7–P9 (measured on the users' own code: plain vmap, jax.grad,
-the command line's second run) in `_bench_user.py`, and the goals with their notes in
-`_bench_goals.py`. (There is no P6.)
+(`_cli/_bench.py`) writes it with the figures (`_plot.py`). The peers and the
+reference are in `_peers.py`, the throughput scene and the sharded sweep's timing in
+`_scale.py`, the goals P7–P9 (measured on the users' own code: plain vmap, jax.grad,
+the command line's second run) in `_user.py`, and the goals with their notes in
+`_goals.py`. (There is no P6.)
 """
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ class Size:
     scale_out: bool = True  # the 1-device against 2-device subprocess
     identify_sets: int = 0  # bundled data sets to fit (the default one first)
     identify_runs: int = 1  # fits per data set (the first includes compilation)
-    # P7-P9 (`_bench_user`): P7's rows, and P9's commands (each run twice in fresh processes).
+    # P7-P9 (`_user.py`): P7's rows, and P9's commands (each run twice in fresh processes).
     user_n: int = 1000
     user_cli: tuple[str, ...] = ("simulate", "identify", "reproduce")
     # The batch sizes of the throughput's second strategy (vmapped beside one by one);
