@@ -11,6 +11,7 @@ import subprocess
 import sys
 import textwrap
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -102,6 +103,32 @@ def test_event_loop_compiles_into_one_kernel(options):
     hlo = lowered.compile().as_text()
     entry = _entry_ops(hlo)
     assert 'xla_cpu_small_call="true"' in entry
+    assert not re.search(r"\swhile\(", entry)
+
+
+@pytest.mark.parametrize("piece_solver", ["tsit5", "dopri8"])
+def test_backward_loop_compiles_into_one_kernel(piece_solver):
+    """Reverse mode: the checkpointed loop's backward pass holds no scatter (the
+    transpose of a gather with a batched index, `_event_locate.pick`), so it is one
+    kernel too, as is every other loop of `jax.grad`'s program."""
+
+    def loss(theta):
+        ball = ju.Ball.table1(2, kappa=theta[0], k_r=theta[1])
+        sol = ju.simulate(
+            ball,
+            ball.paper_initial_state(),
+            1.0,
+            solver="event",
+            rtol=1e-10,
+            atol=1e-10,
+            samples=11,
+            piece_solver=piece_solver,
+            outputs=("x",),
+        )
+        return jnp.sum(sol.ys["x"] ** 2) + jnp.sum(ju.impact_times(sol, 3))
+
+    hlo = jax.jit(jax.grad(loss)).lower(jnp.asarray([1e4, 0.2])).compile().as_text()
+    entry = _entry_ops(hlo)
     assert not re.search(r"\swhile\(", entry)
 
 

@@ -257,9 +257,10 @@ def _user_notes(result: dict, out: dict) -> dict:
         notes["P8"] = (
             f"missed: jax.grad {out['P8']['value']:.1f}x the forward solve, jax.jacfwd with "
             f"autodiff='forward' {grad['forward_mode_ratio']:.1f}x. Reverse mode differentiates an equinox "
-            "checkpointed while loop, every step a checkpoint, whose backward pass runs every step's VJP "
-            "without the loop kernels. What would close it: an adjoint per smooth segment with jump "
-            "conditions at the located events (or forward mode when there are few parameters)."
+            "checkpointed while loop, every step a checkpoint that the backward pass reads back (one loop "
+            "kernel on a CPU, as long as nothing in it is a scatter). What would close it: an adjoint per "
+            "smooth segment with jump conditions at the located events (or forward mode when there are "
+            "few parameters)."
         )
     if "P9" in missed:
         p9 = out["P9"]

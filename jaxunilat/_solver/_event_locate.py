@@ -20,8 +20,37 @@ _ITERATIONS = 12
 _REFINE_ITERATIONS = 2
 
 
-def locate(f, a, b, positive_left=None, active=None):
+@jax.custom_jvp
+def pick(x, i):
+    """`x[i]` for a short vector x and a traced integer index i, whose derivative is a
+    chain of selects between x's static slices.
+
+    Under `vmap` (a batched i) `x[i]` is a gather, and in reverse mode the derivative of
+    a gather is a scatter: one scatter in the backward loop keeps XLA:CPU from compiling
+    that loop into one kernel (README, Differentiation). The selects are exact and
+    transpose to selects and pads. The value is still the gather: `locate` picks the
+    value and the s-derivative of its vector function with it, so a solve that is not
+    differentiated computes exactly what indexing did."""
+    return x[i]
+
+
+@pick.defjvp
+def _pick_jvp(primals, tangents):
+    x, i = primals
+    x_dot = tangents[0]
+    out = x_dot[0]
+    for k in range(1, x.shape[0]):
+        out = jnp.where(i == k, x_dot[k], out)
+    # `pick` again, not x[i]: an enclosing derivative differentiates this rule too.
+    return pick(x, i), out
+
+
+def locate(f, a, b, positive_left=None, active=None, index=None):
     """A root of f in [a, b], given that f changes sign on (a, b].
+
+    With `index` (a traced integer) f is vector-valued and the root is that of its
+    component `index`, picked from f's value and s-derivative by `pick`: reverse mode
+    then meets no gather.
 
     `positive_left` (optional) is the sign of f just right of a, where f(a) itself may
     be a rounding-level zero (a piece that starts at a root). With `active` False
@@ -34,13 +63,28 @@ def locate(f, a, b, positive_left=None, active=None):
     step, whose derivative is −(∂f/∂θ)/ḟ: the implicit-function gradient of the root.
     """
     a, b = jax.lax.stop_gradient(a), jax.lax.stop_gradient(b)
+    if index is not None:
+        f_vec = f
+
+        def f(s):
+            return pick(f_vec(s), index)
+
+        def f_jvp(s):
+            value, slope = jax.jvp(f_vec, (s,), (jnp.ones_like(s),))
+            return pick(value, index), pick(slope, index)
+
+    else:
+
+        def f_jvp(s):
+            return jax.jvp(f, (s,), (jnp.ones_like(s),))
+
     if positive_left is None:
         positive_left = jax.lax.stop_gradient(f(a)) > 0
     eps = 4 * jnp.finfo(a.dtype).eps
 
     def body(state):
         i, lo, hi, x, _ = state
-        fx, dfx_ = jax.lax.stop_gradient(jax.jvp(f, (x,), (jnp.ones_like(x),)))
+        fx, dfx_ = jax.lax.stop_gradient(f_jvp(x))
         left = (fx > 0) == positive_left
         lo = jnp.where(left, x, lo)
         hi = jnp.where(left, hi, x)
@@ -58,7 +102,7 @@ def locate(f, a, b, positive_left=None, active=None):
     idle = jnp.array(False) if active is None else ~jax.lax.stop_gradient(active)
     state = (jnp.array(0), a, b, 0.5 * (a + b), idle)
     root = jax.lax.while_loop(going, body, state)[3]
-    value, slope = jax.jvp(f, (root,), (jnp.ones_like(root),))
+    value, slope = f_jvp(root)
     step = jnp.where(slope == 0, 0.0, value / jnp.where(slope == 0, 1.0, slope))
     # Numerically ~0 (the root is located to machine precision); it carries the
     # implicit-function derivative.
@@ -169,7 +213,7 @@ def first_crossing(model, trial: Trial, mask, t_ext, y_ext):
     def root_of(i):
         pc = jnp.minimum(first_pt[i], n_pts - 1)
         a = jnp.where(first_pt[i] == 0, t, check_t[jnp.maximum(pc - 1, 0)])
-        return locate(lambda s: model.switches(trial.dense(s))[i], a, check_t[pc], active=first[i])
+        return locate(lambda s: model.switches(trial.dense(s)), a, check_t[pc], active=first[i], index=i)
 
     roots = jax.lax.cond(
         crossing,
