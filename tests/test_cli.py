@@ -367,3 +367,17 @@ def test_a_solver_failure_inside_a_transformation_prints_its_own_message(capsys,
         "jaxunilat: error: jaxunilat.simulate: the solver used all max_steps = 16384 steps before t1 "
         "(event); increase max_steps"
     )
+
+
+def test_bundled_data_is_found_from_any_working_folder(tmp_path, monkeypatch):
+    """`jaxunilat identify` without DATA, and the bench, find the source tree's data/
+    beside the package, not only in the working folder."""
+    import os
+
+    from jaxunilat._bench._main import _data_sets
+    from jaxunilat._cli._identify import default_data_path
+
+    monkeypatch.chdir(tmp_path)
+    path = default_data_path()
+    assert os.path.isfile(path) and path.endswith(os.path.join("data", "drop_trace.csv"))
+    assert path in _data_sets() and len(_data_sets()) >= 5

@@ -34,6 +34,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..internal._io import bundled_data
 from . import _peers as peers, _user as user
 from ._goals import P3_ERROR, goal_table as goal_table, goals
 from ._scale import SAMPLES, T1, Y0
@@ -807,14 +808,7 @@ def loop_structure(fn, *args) -> dict:
 
 def _data_sets() -> list[str]:
     """The bundled data sets (`data/*.csv` of the source tree), or none when not shipped."""
-    import glob
-
-    here = os.path.dirname(os.path.abspath(__file__))
-    for root in (os.path.join(here, os.pardir), os.getcwd()):
-        found = sorted(glob.glob(os.path.join(root, "data", "*.csv")))
-        if found:
-            return [os.path.normpath(p) for p in found]
-    return []
+    return bundled_data("*.csv")
 
 
 def _identification(size: Size, log) -> dict:

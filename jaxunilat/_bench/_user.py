@@ -252,10 +252,10 @@ def _scene() -> str:
 # -- P9 -----------------------------------------------------------------------------------
 
 #: P9's commands: name -> the arguments after `jaxunilat` (`{out}`: a folder in the run's
-#: working directory, a temporary one).
+#: working directory, a temporary one; `{data}`: the bundled drop trace).
 CLI_COMMANDS = {
     "simulate": ("simulate", "ball", "--solver", "event"),
-    "identify": ("identify",),
+    "identify": ("identify", "{data}"),
     "reproduce": ("reproduce", "--quick", "--out", "{out}"),
 }
 
@@ -276,9 +276,18 @@ def _child_env(cache: str) -> dict:
         env["XLA_FLAGS"] = flags
     else:
         env.pop("XLA_FLAGS", None)
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    # The folder that holds this copy of the package (jaxunilat/_bench/ is two levels down).
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH", "")) if p)
     return env
+
+
+def _bundled_trace() -> str:
+    """The bundled drop trace for P9's `identify` (the child runs in a temporary folder)."""
+    from ..internal._io import bundled_data
+
+    found = bundled_data("drop_trace.csv")
+    return found[0] if found else "data/drop_trace.csv"
 
 
 def _cache_files(path: str) -> tuple[int, int]:
@@ -294,7 +303,9 @@ def _cli_pair(name: str, log) -> dict:
         env = _child_env(cache)
         runs = []
         for i in (1, 2):
-            args = [a.format(out=os.path.join(work, f"out{i}")) for a in CLI_COMMANDS[name]]
+            args = [
+                a.format(out=os.path.join(work, f"out{i}"), data=_bundled_trace()) for a in CLI_COMMANDS[name]
+            ]
             start = time.perf_counter()
             proc = subprocess.run(
                 [sys.executable, "-m", "jaxunilat", *args],

@@ -2,16 +2,14 @@
 
 from __future__ import annotations
 
-import os
-
 
 def default_data_path() -> str:
     """The bundled default data set, `data/drop_trace.csv` (a synthetic 1 kHz drop test)."""
-    here = os.path.dirname(os.path.abspath(__file__))
-    for root in (os.path.join(here, os.pardir), os.getcwd()):
-        path = os.path.normpath(os.path.join(root, "data", "drop_trace.csv"))
-        if os.path.isfile(path):
-            return path
+    from ..internal._io import bundled_data
+
+    found = bundled_data("drop_trace.csv")
+    if found:
+        return found[0]
     raise ValueError(
         "no DATA given and the bundled data/drop_trace.csv was not found (it ships with the source tree); "
         "pass a data file: jaxunilat identify DATA.csv"

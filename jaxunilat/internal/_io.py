@@ -172,3 +172,20 @@ def read_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
     if data.shape[1] != len(header):
         raise ValueError(f"{os.fspath(path)!r}: {len(header)} header names but {data.shape[1]} columns")
     return {name: data[:, i] for i, name in enumerate(header)}
+
+
+def bundled_data(pattern: str = "*.csv") -> list[str]:
+    """The source tree's bundled data files `data/<pattern>`, sorted; [] where they are
+    not shipped (an installed package without its source tree).
+
+    Looked for beside the package (a checkout or an editable install: the folder that
+    holds `jaxunilat/`), then in the working folder.
+    """
+    import glob
+
+    here = os.path.dirname(os.path.abspath(__file__))  # jaxunilat/internal/
+    for root in (os.path.join(here, os.pardir, os.pardir), os.getcwd()):
+        found = sorted(glob.glob(os.path.join(root, "data", pattern)))
+        if found:
+            return [os.path.normpath(p) for p in found]
+    return []
