@@ -350,8 +350,9 @@ class Ball(AbstractModel):
             and isinstance(self.heaviside, (Exact, Logistic, Softplus))
         )
 
-    def _smooth_rest(self, y):
-        """(bound, x̂) of the smoothed rest criterion (`jaxunilat._models._rest_smooth`)."""
+    def _smooth_equilibrium(self):
+        """The parameter-only part of the smoothed rest criterion
+        (`jaxunilat._models._rest_smooth`): (x̂ m, k_min, k_max, r, residual m/s²)."""
         pos = self.gravity > 0
         g = jnp.where(pos, self.gravity, 1.0)  # g = 0 never rests: safe unused values
         hc = isinstance(self.law, HuntCrossley)
@@ -370,8 +371,20 @@ class Ball(AbstractModel):
         zero = jnp.zeros_like(x_hat)
         push = jnp.abs(self.contact_force(x_hat, zero)) / self.mass
         residual = jnp.abs(push - g) + 16 * jnp.finfo(x_hat.dtype).eps * (push + g)
-        err = _rest_smooth.smooth_rest_error(y[0], y[1], x_hat, k_min, k_max, r, residual, self.gravity)
-        return err, x_hat
+        return x_hat, k_min, k_max, r, residual
+
+    def _smooth_rest_error(self, y, equilibrium):
+        """The smoothed rest bound at `y`, m, about `equilibrium` (`_smooth_equilibrium`)."""
+        return _rest_smooth.smooth_rest_error(y[0], y[1], *equilibrium, self.gravity)
+
+    def rest_error_fn(self):
+        """`rest_error` as a function of (y, mask, horizon), with its parameter-only part
+        (the smoothed equilibrium, a Newton solve) done once, here: for a solver that
+        tests every step."""
+        if self.can_rest and self.heaviside.smooth:
+            equilibrium = self._smooth_equilibrium()
+            return lambda y, mask, horizon: self._smooth_rest_error(y, equilibrium)
+        return self.rest_error
 
     def rest_error(self, y: Array, mask: Array, horizon: Array) -> Array:
         """Whether the contact in `mask` can never end, and how well `rest_state` follows it.
@@ -399,7 +412,7 @@ class Ball(AbstractModel):
         if not self.can_rest:
             return inf
         if self.heaviside.smooth:
-            return self._smooth_rest(y)[0]
+            return self._smooth_rest_error(y, self._smooth_equilibrium())
         pen = self.lower - x
         if isinstance(self.law, HuntCrossley):
             err = _rest.hunt_crossley_rest_error(
@@ -431,7 +444,7 @@ class Ball(AbstractModel):
         if not self.can_rest:
             return y  # never used: `rest_error` is +inf
         if self.heaviside.smooth:
-            x_hat = self._smooth_rest(y)[1]
+            x_hat = self._smooth_equilibrium()[0]
             return jnp.stack([x_hat + jnp.zeros_like(x), jnp.zeros_like(v)])
         if isinstance(self.law, HuntCrossley):
             # (g = 0 never rests: a safe g keeps the unused power's derivative finite.)

@@ -186,17 +186,19 @@ def _finish(ys, y1, status, settings, throw, ts, stats, events=None, checks=()):
 def _can_rest(model) -> bool:
     """Whether the time-stepping solve looks for a ball at rest (static): the model has
     a rest criterion (on the class: see `simulate`'s check of `switches`) that can hold."""
-    return hasattr(type(model), "rest_error") and bool(getattr(model, "can_rest", True))
+    return hasattr(type(model), "rest_error_fn") and bool(getattr(model, "can_rest", True))
 
 
-def _rest_event(settings: SolverSettings, t1):
+def _rest_event(model, settings: SolverSettings, t1):
     """A terminating diffrax event: the contact provably never ends and the model's
     closed form (`rest_state`) follows it to t1 within the tolerance, atol + rtol·|y|
-    (the event mode's test, in the model's amplitude units, m for the ball)."""
+    (the event mode's test, in the model's amplitude units, m for the ball). The
+    criterion's parameter-only part is computed once, not at every step."""
+    bound_of = model.rest_error_fn()
 
     def resting(t, y, args, **kwargs):
         y = jax.lax.stop_gradient(y)
-        bound = args.rest_error(y, args.switches(y) > 0, t1 - t)
+        bound = bound_of(y, args.switches(y) > 0, t1 - t)
         return bound <= settings.atol + settings.rtol * jnp.max(jnp.abs(y))
 
     return dfx.Event(resting)
@@ -255,7 +257,7 @@ def _solve_impl(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[
         stepsize_controller=settings.controller(),
         adjoint=settings.adjoint(),
         max_steps=settings.max_steps,
-        event=_rest_event(settings, t1) if rests else None,
+        event=_rest_event(model, settings, t1) if rests else None,
         throw=False,
     )
     ys, y1 = sol.ys[0], sol.ys[1][0]
