@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
 
-from .._models._contact import RK4_STEPS_PER_CONTACT
+from .._models._contact import RK4_STEPS_PER_CONTACT, HuntCrossley
 from .._models._heaviside import Exact
 from .._models._model import AbstractModel
 from ..internal._validate import (
@@ -534,11 +534,6 @@ def _is_concrete_tree(tree) -> bool:
     return all(is_concrete(leaf) for leaf in jax.tree_util.tree_leaves(tree))
 
 
-def _stiffens(law) -> bool:
-    """Whether a contact law's stiffness grows with depth (Hunt–Crossley)."""
-    return type(law).__name__ == "HuntCrossley"
-
-
 def _check_rk4_step(model, dt, y0) -> None:
     """Raise `ValueError` when a concrete RK4 step `dt` exceeds the model's limit
     (traced values are checked at run time: `Status.INVALID_INPUT`)."""
@@ -553,11 +548,9 @@ def _check_rk4_step(model, dt, y0) -> None:
     if not step > limit:
         return
     if math.isfinite(t_c) and limit == t_c / RK4_STEPS_PER_CONTACT:
-        form = (
-            "pi/omega_d"
-            if getattr(model, "law", None) is None or not _stiffens(model.law)
-            else ("pi/omega at the deepest penetration the initial energy allows")
-        )
+        # Hunt–Crossley stiffens with depth: its t_c is taken at the deepest penetration.
+        stiffens = isinstance(getattr(model, "law", None), HuntCrossley)
+        form = "pi/omega at the deepest penetration the initial energy allows" if stiffens else "pi/omega_d"
         why = f"a tenth of the contact time t_c = {form} = {t_c:.3g} s"
     else:
         why = "the time scale of the contact's damping (1/|lambda| of its fastest mode)"
