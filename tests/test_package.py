@@ -52,8 +52,7 @@ def _imports(path):
     not count); relative imports resolved against the file's package."""
     import ast
 
-    root = path.parents[len(path.relative_to(_ROOT).parts) - 1]
-    package = ".".join(path.relative_to(root.parent).with_suffix("").parts)
+    package = ".".join(path.relative_to(_ROOT).with_suffix("").parts)
     if path.name == "__init__.py":
         package += ".__init__"
     found = []
