@@ -129,21 +129,17 @@ def _run_import(args) -> int:
             raise ValueError(
                 f"--plot {args.plot!r}: unsupported image format {suffix!r}; use e.g. .png, .pdf, .svg"
             )
+    import identify
+
     common = dict(mass=args.mass, drag=args.drag, x0=args.x0, v0=args.v0, noise=args.noise)
     if args.source_kind == "wav":
-        from identify import import_wav
-
-        result = import_wav(
+        result = identify.import_wav(
             args.source, threshold=args.threshold, dead_time=args.dead_time, min_gap=args.min_gap, **common
         )
     elif args.source_kind == "phyphox":
-        from identify import import_phyphox
-
-        result = import_phyphox(args.source, **common)
+        result = identify.import_phyphox(args.source, **common)
     else:
-        from identify import import_video
-
-        result = import_video(args.source, column=args.column, scale=args.scale, **common)
+        result = identify.import_video(args.source, column=args.column, scale=args.scale, **common)
     print(result.summary())
     try:
         result.write(args.out, overwrite=True)
@@ -151,10 +147,7 @@ def _run_import(args) -> int:
         if args.plot is not None:
             from ..plot import save_figure
 
-            if args.source_kind == "wav":
-                from identify import plot_detection as plot
-            else:
-                from identify import plot_table_import as plot
+            plot = identify.plot_detection if args.source_kind == "wav" else identify.plot_table_import
             save_figure(plot(result), args.plot)
             print(f"{'wrote':<10} {args.plot}")
     except OSError as err:
