@@ -51,10 +51,14 @@ def _run_bench(args) -> int:
     # Before anything computes: one CPU device per core, so that sweeps use every core.
     host_devices()
     # The bench measures compile times (P5 and every compile_s): no persistent compilation
-    # cache in this process (P9 measures the cache, in child processes with a new one).
+    # cache nor executable cache in this process (P9 measures the caches, in child
+    # processes with a new one).
     import jax
 
+    from .._solver._executables import disable_executable_cache
+
     jax.config.update("jax_enable_compilation_cache", False)
+    disable_executable_cache()
 
     from .._bench._main import goal_table, run_bench
     from .._bench._plot import throughput_figure, work_precision_figure

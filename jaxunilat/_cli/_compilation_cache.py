@@ -1,9 +1,13 @@
-"""The command line's persistent compilation cache: a second run skips XLA compilation.
+"""The command line's persistent caches: a second run skips XLA compilation, and a
+second `simulate` also its tracing.
 
 Every `jaxunilat` command compiles its solver afresh (1–3 s on 2 cores), more than most
 commands then compute. JAX can keep compiled executables on disk
-(`jax_compilation_cache_dir`); the command line turns that on before anything compiles,
-in a user cache directory:
+(`jax_compilation_cache_dir`), but still traces and lowers a program to find its key
+(about 1 s for the event mode); `simulate`'s top-level calls therefore also keep their
+executables under a key computed before tracing (`jaxunilat._solver._executables`, in
+the `executables` folder). The command line turns both on before anything compiles, in
+a user cache directory:
 
 - `$JAXUNILAT_CACHE_DIR` if set, else `$XDG_CACHE_HOME/jaxunilat`, else
   `~/.cache/jaxunilat`;
@@ -18,6 +22,8 @@ test suite runs without it.
 from __future__ import annotations
 
 import os
+
+from .._solver._executables import SUBDIR as EXECUTABLES_SUBDIR, enable_executable_cache
 
 #: Environment variables: the directory, and the opt-out.
 CACHE_DIR_ENV = "JAXUNILAT_CACHE_DIR"
@@ -39,7 +45,8 @@ def cache_disabled() -> bool:
 
 
 def enable_compilation_cache(path: str | None = None) -> str | None:
-    """Turn on JAX's persistent compilation cache in `path` (default `cache_dir()`).
+    """Turn on JAX's persistent compilation cache in `path` (default `cache_dir()`), and
+    `simulate`'s executable cache in its `executables` folder.
 
     Every compiled program is kept (no minimum compile time or size). Returns the
     directory, or None when `JAXUNILAT_NO_CACHE` is set or the directory cannot be made
@@ -57,4 +64,5 @@ def enable_compilation_cache(path: str | None = None) -> str | None:
     jax.config.update("jax_compilation_cache_dir", path)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    enable_executable_cache(os.path.join(path, EXECUTABLES_SUBDIR))
     return path

@@ -180,7 +180,7 @@ def _run_simulate_coupling(args) -> int:
         ),
         ("time", f"[0, {args.t1:g}] s, {args.samples} samples"),
         ("steps", f"{int(sol.num_steps)} (rejected {int(sol.num_rejected_steps)})"),
-        ("wall time", f"{wall:.3f} s (including JIT compilation)"),
+        ("wall time", f"{wall:.3f} s (including JIT compilation, or loading it from the cache)"),
     ]
     if sol.events is not None:
         from .._solver._coupling_impacts import impact_table

@@ -200,14 +200,14 @@ def _build_ball(args):
 
 
 def _check_outputs(args) -> None:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-
     from ..internal._io import check_output_paths
 
     if args.events is not None and args.solver != "event":
         raise UsageError(f"--events needs --solver event (got --solver {args.solver})")
     check_output_paths(("--out", args.out), ("--plot", args.plot), ("--events", args.events))
     if args.plot is not None:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg  # ~0.2 s: only when plotting
+
         suffix = os.path.splitext(args.plot)[1].lstrip(".").lower()
         if suffix and suffix not in FigureCanvasAgg.get_supported_filetypes():
             raise ValueError(
@@ -338,7 +338,7 @@ def _run_simulate_ball(args) -> int:
             "steps",
             f"{int(sol.num_steps)} (accepted {int(sol.num_accepted_steps)}, rejected {int(sol.num_rejected_steps)})",
         ),
-        ("wall time", f"{wall:.3f} s (including JIT compilation)"),
+        ("wall time", f"{wall:.3f} s (including JIT compilation, or loading it from the cache)"),
         ("contacts", f"{n} {where} ({lower} lower, {upper} upper)"),
         ("final", f"x(t1) = {x1!r} m, v(t1) = {v1!r} m/s"),
     ]
@@ -423,11 +423,13 @@ def build_parser() -> argparse.ArgumentParser:
         prog=PROG,
         description="Differentiable simulation of systems with unilateral constraints [K90].",
         epilog=f"Compiled solvers are cached in {cache_dir()} (${CACHE_DIR_ENV} moves it; --no-cache or "
-        f"{NO_CACHE_ENV}=1 turns it off): a second run skips compilation.",
+        f"{NO_CACHE_ENV}=1 turns it off): a second run skips compilation (simulate: also tracing).",
     )
     parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
     parser.add_argument(
-        "--no-cache", action="store_true", help="do not use the persistent compilation cache for this run"
+        "--no-cache",
+        action="store_true",
+        help="do not use the persistent caches (compiled programs) for this run",
     )
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_Parser)
     for add in _COMMANDS:

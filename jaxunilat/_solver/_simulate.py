@@ -31,6 +31,7 @@ from ..internal._validate import (
 from ._batching import batching_mode, rowwise_differentiable
 from ._device_cache import DeviceCache
 from ._event import _EV as _EVENT_COLUMNS, EventRecord, event_solve
+from ._executables import executable_cache
 from ._settings import SolverSettings, failure_hints, make_settings
 
 #: The most memory `simulate` lets one run's save times and outputs (or the event
@@ -306,11 +307,15 @@ _solve = jax.jit(_solve_batched, static_argnames=("outputs", "throw", "vmap"))
 
 
 def _run(model, y0, t0, t1, ts, settings, outputs, throw):
-    """Call `_solve`; with `throw`, wait for the result and turn a solver failure into
-    an `equinox.EquinoxRuntimeError` that carries only our message (JAX's own error
-    wraps it in a host callback's traceback)."""
+    """Call `_solve` (through the command line's executable cache, `_executables`, when it
+    is on); with `throw`, wait for the result and turn a solver failure into an
+    `equinox.EquinoxRuntimeError` that carries only our message (JAX's own error wraps
+    it in a host callback's traceback)."""
+    args = (model, y0, t0, t1, ts, settings)
+    static = (outputs, throw, batching_mode())
+    kept = None if throw else executable_cache()  # throw's errors are host callbacks
     try:
-        sol = _solve(model, y0, t0, t1, ts, settings, outputs, throw, batching_mode())
+        sol = _solve(*args, *static) if kept is None else kept.call("simulate", _solve, args, static)
         if throw and not isinstance(sol.status, jax.core.Tracer):
             sol.status.block_until_ready()
     except jax.errors.JaxRuntimeError as err:

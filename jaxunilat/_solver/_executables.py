@@ -1,0 +1,206 @@
+"""Compiled solves kept on disk: the command line's second run skips tracing, lowering
+and compiling.
+
+JAX's persistent compilation cache (`jax_compilation_cache_dir`) saves the compile, but
+finds its key by tracing and lowering the program first: for the event mode that is
+about 1 s on 2 cores, more than a short solve, and half of a warm `jaxunilat simulate`.
+This cache keys a call *before* tracing, on everything that decides its program, and
+keeps the compiled executable (`jax.experimental.serialize_executable`) with a
+zero-size template of the output's structure. A hit loads it (~0.2 s) and calls it.
+
+The key is a SHA-256 digest of:
+
+- the format below, the versions of jax and jaxlib, and a digest of the jaxunilat
+  source files (a new release or an edited checkout never runs a stale program);
+- the backend (platform, device kind, platform version), `XLA_FLAGS`, and JAX's
+  settings other than its caches';
+- the function's name, its static arguments, the arguments' tree structure (which
+  holds the models' and settings' static fields) and each leaf's shape, dtype and weak
+  type.
+
+A call whose key cannot be written faithfully (a repr with an address in it) is not
+cached. Any failure to read, load or write an entry falls back to the plain compiled
+call, and an unreadable entry is deleted. Only calls with no host callbacks can be
+serialized: `simulate` uses the cache for `throw=False` only. At most `max_entries`
+files are kept (the least recently used go first); deleting the directory is always
+safe.
+
+Only the command line turns it on (`enable_executable_cache`, beside the compilation
+cache, in `<cache dir>/executables`); the Python API and the test suite leave it off.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import pickle
+import tempfile
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import numpy as np
+
+#: Bumped when the file layout or the key's recipe changes.
+FORMAT = 1
+#: Where, within the command line's cache directory, the executables go.
+SUBDIR = "executables"
+#: The default number of entries kept on disk (each ~1–2 MB for the event mode).
+MAX_ENTRIES = 64
+
+_SOURCE_DIGEST: list[str] = []
+
+
+def _source_digest() -> str:
+    """A digest of every .py file of the installed jaxunilat package (once per process)."""
+    if not _SOURCE_DIGEST:
+        root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+        digest = hashlib.sha256()
+        for folder, dirs, files in os.walk(root):
+            dirs.sort()
+            for name in sorted(f for f in files if f.endswith(".py")):
+                path = os.path.join(folder, name)
+                digest.update(os.path.relpath(path, root).encode())
+                with open(path, "rb") as f:
+                    digest.update(f.read())
+        _SOURCE_DIGEST.append(digest.hexdigest())
+    return _SOURCE_DIGEST[0]
+
+
+def _environment() -> str:
+    import jaxlib
+
+    device = jax.devices()[0]
+    settings = sorted((k, v) for k, v in jax.config.values.items() if "cache" not in k)
+    return repr(
+        (
+            FORMAT,
+            jax.__version__,
+            jaxlib.__version__,
+            _source_digest(),
+            device.platform,
+            device.device_kind,
+            device.client.platform_version,
+            os.environ.get("XLA_FLAGS", ""),
+            settings,
+        )
+    )
+
+
+def call_key(name: str, args: tuple, static: tuple) -> str | None:
+    """The cache key of `name(*args, *static)` (`static`: its static arguments), or None
+    where it cannot be written faithfully (a leaf that is not an array, or an address in
+    a repr)."""
+    leaves, tree = jax.tree_util.tree_flatten(args)
+    avals = []
+    for leaf in leaves:
+        if not isinstance(leaf, (jax.Array, np.ndarray)) or isinstance(leaf, jax.core.Tracer):
+            return None
+        avals.append((leaf.shape, str(leaf.dtype), bool(getattr(leaf, "weak_type", False))))
+    text = repr((name, static, str(tree), avals))
+    if " at 0x" in text:
+        return None
+    return hashlib.sha256((_environment() + text).encode()).hexdigest()
+
+
+class ExecutableCache:
+    """Compiled programs on disk, by `call_key` (see the module docstring)."""
+
+    def __init__(self, path: str, max_entries: int = MAX_ENTRIES):
+        self.path = path
+        self.max_entries = max_entries
+        self._loaded: dict[str, Any] = {}
+
+    def _file(self, key: str) -> str:
+        return os.path.join(self.path, key + ".jaxexe")
+
+    def call(self, name: str, jitted: Callable, args: tuple, static: tuple):
+        """`jitted(*args, *static)`, from a kept executable where there is one (`static`:
+        the trailing static arguments)."""
+        key = call_key(name, args, static)
+        if key is None:
+            return jitted(*args, *static)
+        compiled = self._loaded.get(key) or self._load(key, args)
+        if compiled is not None:
+            return compiled(*args)
+        compiled = jitted.lower(*args, *static).compile()
+        out = compiled(*args)
+        self._loaded[key] = compiled
+        self._store(key, compiled, out)
+        return out
+
+    def _load(self, key: str, args: tuple):
+        from jax.experimental import serialize_executable
+
+        path = self._file(key)
+        if not os.path.exists(path):
+            return None
+        try:
+            with open(path, "rb") as f:
+                payload, template = pickle.load(f)
+            in_tree = jax.tree_util.tree_structure((args, {}))
+            out_tree = jax.tree_util.tree_structure(template)
+            compiled = serialize_executable.deserialize_and_load(payload, in_tree, out_tree)
+        except Exception:  # a damaged, truncated or incompatible entry: compile afresh
+            _remove(path)
+            return None
+        os.utime(path)  # least recently used goes first
+        self._loaded[key] = compiled
+        return compiled
+
+    def _store(self, key: str, compiled, out) -> None:
+        from jax.experimental import serialize_executable
+
+        try:
+            payload, _, _ = serialize_executable.serialize(compiled)
+            template = jax.tree_util.tree_map(lambda x: np.zeros(0, x.dtype), out)
+            os.makedirs(self.path, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=self.path, suffix=".tmp")
+            with os.fdopen(fd, "wb") as f:
+                pickle.dump((payload, template), f, protocol=pickle.HIGHEST_PROTOCOL)
+            os.replace(tmp, self._file(key))
+        except Exception:  # a read-only or full disk, or a program that cannot be serialized
+            return
+        self._evict()
+
+    def _evict(self) -> None:
+        entries = [os.path.join(self.path, f) for f in os.listdir(self.path) if f.endswith(".jaxexe")]
+        if len(entries) <= self.max_entries:
+            return
+        entries.sort(key=_mtime)
+        for path in entries[: len(entries) - self.max_entries]:
+            _remove(path)
+
+
+def _mtime(path: str) -> float:
+    try:
+        return os.path.getmtime(path)
+    except OSError:
+        return 0.0
+
+
+def _remove(path: str) -> None:
+    try:
+        os.remove(path)
+    except OSError:
+        pass
+
+
+_ACTIVE: list[ExecutableCache] = []
+
+
+def enable_executable_cache(path: str, max_entries: int = MAX_ENTRIES) -> ExecutableCache:
+    """Keep compiled `simulate` calls in `path` for the rest of the process (the command
+    line does this; see the module docstring)."""
+    _ACTIVE[:] = [ExecutableCache(path, max_entries)]
+    return _ACTIVE[0]
+
+
+def disable_executable_cache() -> None:
+    """Stop using the executable cache in this process."""
+    _ACTIVE.clear()
+
+
+def executable_cache() -> ExecutableCache | None:
+    """The process's executable cache, or None when it is off (the default)."""
+    return _ACTIVE[0] if _ACTIVE else None

@@ -1,0 +1,134 @@
+"""`simulate`'s executable cache (the command line's): a kept program gives the same
+results as a fresh compile, without tracing; a new structure, backend setting or
+source gets a new entry; a damaged entry is recompiled; it is never used where it
+cannot be (throw=True, inside a transformation)."""
+
+import os
+import subprocess
+import sys
+
+import jax
+import numpy as np
+import pytest
+
+import jaxunilat as ju
+from jaxunilat._solver import _executables
+from jaxunilat._solver._executables import (
+    ExecutableCache,
+    call_key,
+    disable_executable_cache,
+    enable_executable_cache,
+)
+
+T1 = 0.3
+
+
+def _simulate(kappa=1e4, outputs=("x", "v"), throw=False):
+    ball = ju.Ball.table1(2, kappa=kappa)
+    return ju.simulate(
+        ball, ball.paper_initial_state(), T1, solver="event", samples=31, outputs=outputs, throw=throw
+    )
+
+
+def _entries(path):
+    return sorted(f for f in os.listdir(path) if f.endswith(".jaxexe")) if os.path.isdir(path) else []
+
+
+def _same(a, b):
+    for x, y in zip(jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b), strict=True):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+
+
+@pytest.fixture
+def cache_dir(tmp_path):
+    yield str(tmp_path / "executables")
+    disable_executable_cache()
+
+
+def test_a_kept_program_runs_without_tracing_and_matches_a_fresh_compile(cache_dir):
+    plain = [_simulate(kappa) for kappa in (1e4, 3e4)]
+    enable_executable_cache(cache_dir)
+    first = _simulate(1e4)
+    assert len(_entries(cache_dir)) == 1
+    enable_executable_cache(cache_dir)  # a new process: nothing loaded yet
+    before = ju.debug.trace_counts().get("simulate", 0)
+    again = [_simulate(kappa) for kappa in (1e4, 3e4)]  # new values, same program
+    assert ju.debug.trace_counts().get("simulate", 0) == before
+    assert len(_entries(cache_dir)) == 1
+    for kept, fresh in zip([first, *again], [plain[0], *plain], strict=True):
+        _same(kept, fresh)
+    assert float(np.max(np.abs(np.asarray(again[0]["x"]) - np.asarray(again[1]["x"])))) > 1e-4
+
+
+def test_a_new_structure_gets_its_own_entry_and_old_ones_are_evicted(cache_dir):
+    enable_executable_cache(cache_dir, max_entries=2)
+    _simulate(outputs=("x",))
+    _simulate(outputs=("x", "v"))
+    assert len(_entries(cache_dir)) == 2
+    _simulate(outputs=("v",))
+    assert len(_entries(cache_dir)) == 2
+
+
+def test_a_damaged_entry_is_recompiled(cache_dir):
+    reference = _simulate()
+    enable_executable_cache(cache_dir)
+    _simulate()
+    (name,) = _entries(cache_dir)
+    with open(os.path.join(cache_dir, name), "r+b") as f:
+        f.truncate(1000)
+    enable_executable_cache(cache_dir)
+    _same(_simulate(), reference)
+    (again,) = _entries(cache_dir)
+    assert again == name and os.path.getsize(os.path.join(cache_dir, name)) > 1000
+
+
+def test_never_used_with_throw_or_inside_a_transformation(cache_dir):
+    enable_executable_cache(cache_dir)
+    _simulate(throw=True)
+    jax.jit(lambda k: _simulate(k).ys["x"])(2e4)
+    jax.grad(lambda k: _simulate(k)["x"][-1])(2e4)
+    assert _entries(cache_dir) == []
+
+
+def test_the_key_covers_values_that_decide_the_program(monkeypatch):
+    ball = ju.Ball.table1(2)
+    args = (ball, np.zeros(2), np.asarray(1.0))
+    key = call_key("simulate", args, ("x",))
+    assert key is not None
+    assert key == call_key("simulate", (ju.Ball.table1(2, kappa=5.0), np.ones(2), np.asarray(2.0)), ("x",))
+    assert key != call_key("simulate", args, ("v",))
+    assert key != call_key("simulate", (ball, np.zeros(3), np.asarray(1.0)), ("x",))
+    assert key != call_key("simulate", (ball, np.zeros(2, np.float32), np.asarray(1.0)), ("x",))
+    assert key != call_key("simulate", (ju.Ball.table1(2, heaviside=ju.Logistic(1e-6)), *args[1:]), ("x",))
+    monkeypatch.setenv("XLA_FLAGS", "--xla_cpu_enable_fast_math=false")
+    assert key != call_key("simulate", args, ("x",))
+    monkeypatch.delenv("XLA_FLAGS")
+    monkeypatch.setattr(_executables, "_SOURCE_DIGEST", ["edited"])
+    assert key != call_key("simulate", args, ("x",))
+    assert call_key("simulate", (ball, [0.0, 1.0]), ("x",)) is None  # a leaf that is no array
+
+
+def test_an_unwritable_directory_only_costs_the_cache(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    cache = ExecutableCache(str(blocker / "executables"))
+    reference = _simulate()
+    try:
+        _executables._ACTIVE[:] = [cache]
+        _same(_simulate(), reference)
+    finally:
+        disable_executable_cache()
+
+
+def test_the_command_lines_second_run_traces_nothing(tmp_path):
+    """Two fresh processes on one cache: the second prints the same results, and JAX
+    logs no tracing of the solve (`JAX_LOG_COMPILES`)."""
+    environ = {k: v for k, v in os.environ.items() if k != "JAXUNILAT_NO_CACHE"}
+    environ.update(JAXUNILAT_CACHE_DIR=str(tmp_path / "cache"), JAX_LOG_COMPILES="1")
+    argv = [sys.executable, "-m", "jaxunilat", "simulate", "ball", "--solver", "event", "--t1", "0.3"]
+    runs = [subprocess.run(argv, capture_output=True, text=True, env=environ, timeout=300) for _ in "12"]
+    assert all(r.returncode == 0 for r in runs), runs[-1].stderr
+    assert "_solve_batched" in runs[0].stderr and "_solve_batched" not in runs[1].stderr
+    printed = [[line for line in r.stdout.splitlines() if not line.startswith("wall time")] for r in runs]
+    assert printed[0] == printed[1]
+    assert len(_entries(str(tmp_path / "cache" / "executables"))) == 1
