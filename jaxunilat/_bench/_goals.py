@@ -270,10 +270,10 @@ def _user_notes(result: dict, out: dict) -> dict:
             else f"; a process that only imports jaxunilat takes {p9['import_s']:.2f} s"
         )
         notes["P9"] = (
-            f"missed: first {p9['first_s']:.2f} s, second {p9['second_s']:.2f} s{floor}. With the cache "
-            "the second run still starts Python, imports JAX and traces and lowers every program to find its "
-            "cache key. What would close it: fewer and smaller programs per command, less import work, or "
-            "keying the cache before tracing."
+            f"missed: first {p9['first_s']:.2f} s, second {p9['second_s']:.2f} s{floor}. With the caches "
+            "the second run still starts Python, imports JAX, and loads the kept program (the executable "
+            "cache) or traces and lowers it to find its compilation-cache key. What would close it: less "
+            "import work, or a faster first run's share of it."
         )
     return notes
 

@@ -15,8 +15,9 @@ rtol = atol = 1e-10, 201 save times over [0, 1] s, every other option at its def
   (κ, k_r), against `jax.jit(loss)`, one forward solve of the same run; warm medians.
   Forward mode (`autodiff="forward"` with `jax.jacfwd`) beside it.
 - P9 (`command_line`): wall time of `jaxunilat simulate ball --solver event` run twice,
-  each in a fresh process (`sys.executable -m jaxunilat`) sharing a new, empty
-  persistent compilation cache (`JAXUNILAT_CACHE_DIR`); the second against the first.
+  each in a fresh process (`sys.executable -m jaxunilat`) sharing a new, empty cache
+  directory (`JAXUNILAT_CACHE_DIR`: the compilation cache and `simulate`'s executables);
+  the second against the first.
   `identify` (the bundled data) and `reproduce --quick` likewise, where the size has them.
 """
 
@@ -291,8 +292,9 @@ def _bundled_trace() -> str:
 
 
 def _cache_files(path: str) -> tuple[int, int]:
-    names = [os.path.join(path, f) for f in os.listdir(path)] if os.path.isdir(path) else []
-    return len(names), sum(os.path.getsize(f) for f in names if os.path.isfile(f))
+    """(files, bytes) in the cache directory, its `executables` folder included."""
+    names = [os.path.join(folder, f) for folder, _, files in os.walk(path) for f in files]
+    return len(names), sum(os.path.getsize(f) for f in names)
 
 
 def _cli_pair(name: str, log) -> dict:
