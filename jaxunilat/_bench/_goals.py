@@ -273,7 +273,7 @@ def _user_notes(result: dict, out: dict) -> dict:
             f"missed: first {p9['first_s']:.2f} s, second {p9['second_s']:.2f} s{floor}. With the caches "
             "the second run still starts Python, imports JAX, and loads the kept program (the executable "
             "cache) or traces and lowers it to find its compilation-cache key. What would close it: less "
-            "import work, or a faster first run's share of it."
+            "import work (jax and diffrax take most of it)."
         )
     return notes
 
