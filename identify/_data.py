@@ -46,6 +46,8 @@ import re
 
 import numpy as np
 
+from jaxunilat.internal import write_atomically
+
 #: The format version this module reads and writes.
 FORMAT_VERSION = 1
 SCENES = ("drop", "rackets")
@@ -552,7 +554,7 @@ def write_dataset(path, dataset: Dataset, *, overwrite: bool = False) -> None:
         if os.path.samefile(name, dataset.path):
             raise ValueError(f"{name}: is the file this dataset was read from; refusing to overwrite it")
     try:
-        with open(name, "w" if overwrite else "x", encoding="utf-8", newline="\n") as f:
+        with write_atomically(name, replace=overwrite, encoding="utf-8", newline="\n") as f:
             f.write(text)
     except FileExistsError:
         raise ValueError(f"{name}: the file exists; pass overwrite=True to replace it") from None

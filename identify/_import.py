@@ -121,14 +121,14 @@ class ImportResult:
     def write(self, path, *, overwrite: bool = False) -> None:
         """Write `text()` to `path` (refuses to replace a file unless `overwrite`, and
         never writes over the source)."""
-        from jaxunilat.internal import check_output_paths
+        from jaxunilat.internal import check_output_paths, write_atomically
 
         name = os.fspath(path)
         check_output_paths(("path", name), inputs=(("source", self.source),))
         text = self.text()
         _parse(text, name)  # what is written reads back
         try:
-            with open(name, "w" if overwrite else "x", encoding="utf-8", newline="\n") as f:
+            with write_atomically(name, replace=overwrite, encoding="utf-8", newline="\n") as f:
                 f.write(text)
         except FileExistsError:
             raise ValueError(f"{name}: the file exists; pass overwrite=True to replace it") from None

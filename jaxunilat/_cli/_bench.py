@@ -62,14 +62,16 @@ def _run_bench(args) -> int:
 
     from .._bench._main import goal_table, run_bench
     from .._bench._plot import throughput_figure, work_precision_figure
+    from ..internal import write_atomically
+    from ..plot import save_figure
 
     result = run_bench(size, log=lambda line: print(line, flush=True))
     paths = {name: os.path.join(out, name) for name in OUTPUT_FILES}
     try:
-        with open(paths["bench.json"], "w", encoding="utf-8") as fh:
+        with write_atomically(paths["bench.json"], encoding="utf-8") as fh:
             json.dump(result, fh, indent=1, allow_nan=False)
-        work_precision_figure(result).savefig(paths["work_precision.png"], dpi=120)
-        throughput_figure(result).savefig(paths["throughput.png"], dpi=120)
+        save_figure(work_precision_figure(result), paths["work_precision.png"])
+        save_figure(throughput_figure(result), paths["throughput.png"])
     except OSError as err:
         raise RunError(f"cannot write output: {err}") from None
     print()

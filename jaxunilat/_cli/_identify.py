@@ -85,7 +85,7 @@ def _run_identify(args) -> int:
 
     from identify import NUISANCE, fit, load_dataset
 
-    from ..internal import EXIT_OK, RunError, check_output_paths
+    from ..internal import EXIT_OK, RunError, check_output_paths, write_atomically
 
     nuisance = tuple(name.strip() for name in args.fit.split(",") if name.strip())
     for name in nuisance:
@@ -113,7 +113,7 @@ def _run_identify(args) -> int:
     print(result.report())
     try:
         if args.json is not None:
-            with open(args.json, "w", encoding="utf-8") as fh:
+            with write_atomically(args.json, encoding="utf-8") as fh:
                 json.dump(result.to_json_dict(), fh, indent=2, allow_nan=False)
             print(f"wrote {args.json}")
         if args.plot is not None:

@@ -498,7 +498,9 @@ def main(argv: list[str] | None = None) -> int:
 
     Ctrl-C ends a command at once with one line, `jaxunilat: error: interrupted`, and
     exit code 130. Output files are written after the computation: an interrupted solve
-    leaves none (an interrupt while one is being written may leave it incomplete).
+    leaves none. Each file is moved into place whole (`internal.write_atomically`): an
+    interrupt while one is being written leaves the earlier file of that name as it was,
+    at worst with a hidden `.NAME.*.tmp` beside it.
     """
     from .._solver._loop_kernels import use_loop_kernels
 

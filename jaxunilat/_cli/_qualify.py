@@ -62,7 +62,7 @@ def _run_qualify(args) -> int:
 
     from identify import qualify, qualify_fit
 
-    from ..internal import EXIT_OK, RunError, UsageError, check_output_paths
+    from ..internal import EXIT_OK, RunError, UsageError, check_output_paths, write_atomically
 
     given = args.kappa is not None or args.k_r is not None
     if args.fit is not None and given:
@@ -95,7 +95,7 @@ def _run_qualify(args) -> int:
     if args.json is not None:
         data = {"source": source, **result.to_dict()}
         try:
-            with open(args.json, "w", encoding="utf-8") as f:
+            with write_atomically(args.json, encoding="utf-8") as f:
                 json.dump(data, f, indent=2)
                 f.write("\n")
         except OSError as err:

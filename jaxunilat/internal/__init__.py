@@ -1,7 +1,8 @@
 """What `identify` and the command line share with jaxunilat, beyond its public API.
 
 Argument validation with messages that name the parameter, the value and the valid
-range; the output-path checks every command runs before any work; the command line's
+range; the output-path checks every command runs before any work, and the writer that
+never leaves a partial file; the command line's
 error types and exit codes. `identify` imports only
 jaxunilat's public API and this module (a test checks it), so the two packages depend
 one way.
@@ -11,7 +12,11 @@ between releases.
 """
 
 from ._errors import EXIT_OK as EXIT_OK, PROG as PROG, RunError as RunError, UsageError as UsageError
-from ._io import check_output_dir as check_output_dir, check_output_paths as check_output_paths
+from ._io import (
+    check_output_dir as check_output_dir,
+    check_output_paths as check_output_paths,
+    write_atomically as write_atomically,
+)
 from ._validate import (
     check_choice as check_choice,
     check_finite as check_finite,

@@ -1,13 +1,17 @@
-"""Plain-text output: CSV files of sampled time series.
+"""Plain-text output: CSV files of sampled time series, and writing any file whole.
 
 Writers are generic (a header and equal-length columns) and refuse to write where
 they should not: into a directory, under a missing directory, or over an input file.
+Every file is written through `write_atomically`: an interrupted or failed write leaves
+the old file as it was, never a truncated one.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
-from collections.abc import Iterable, Sequence
+import secrets
+from collections.abc import Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -21,6 +25,54 @@ def _same_file(a: str, b: str) -> bool:
         return os.path.exists(a) and os.path.exists(b) and os.path.samefile(a, b)
     except OSError:
         return False
+
+
+@contextlib.contextmanager
+def write_atomically(
+    path: str | os.PathLike, mode: str = "w", *, replace: bool = True, **open_args
+) -> Iterator:
+    """Open a temporary file beside `path` for writing; move it into place only when the
+    block ends without an error. An interrupt (Ctrl-C) or a failure while writing leaves
+    an existing file untouched and no partial one; the temporary file is removed.
+
+    **Arguments:**
+
+    - `path`: the file to write. A symlink is followed: its target is replaced.
+    - `mode`: `"w"` (text) or `"wb"` (bytes).
+    - `replace`: False refuses to replace an existing file: `FileExistsError`, checked
+      again at the moment of the move (a hard link where the file system has them).
+    - `open_args`: passed to `open`, e.g. `encoding="utf-8", newline="\n"`.
+
+    **Yields:** the open file object.
+    """
+    if mode not in ("w", "wb"):
+        raise ValueError(f"mode = {mode!r} is out of range; valid values are 'w' and 'wb'")
+    target = os.path.realpath(os.fspath(path))
+    if not replace and os.path.lexists(target):
+        raise FileExistsError(target)
+    folder, name = os.path.split(target)
+    tmp = os.path.join(folder, f".{name}.{secrets.token_hex(4)}.tmp")
+    try:
+        with open(tmp, mode.replace("w", "x"), **open_args) as f:
+            yield f
+        _move(tmp, target, replace)
+    finally:
+        if os.path.lexists(tmp):
+            os.remove(tmp)
+
+
+def _move(tmp: str, target: str, replace: bool) -> None:
+    if replace:
+        os.replace(tmp, target)
+        return
+    try:
+        os.link(tmp, target)  # fails if target exists, atomically
+    except FileExistsError:
+        raise
+    except OSError:  # no hard links here: check, then move
+        if os.path.lexists(target):
+            raise FileExistsError(target) from None
+        os.replace(tmp, target)
 
 
 def check_output_path(path: str | os.PathLike, *, inputs: Iterable[str | os.PathLike] = ()) -> None:
@@ -141,7 +193,7 @@ def write_csv(
     if len({len(a) for a in arrays}) > 1:
         raise ValueError(f"columns must all have the same length, got {[len(a) for a in arrays]}")
     cells = [_format_column(a, fmt, nan) for a in arrays]
-    with open(path, "w") as f:
+    with write_atomically(path) as f:
         f.write(",".join(header) + "\n")
         for row in zip(*cells, strict=True):
             f.write(",".join(row) + "\n")

@@ -16,6 +16,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..internal._io import write_atomically
+
 #: The figures `reproduce` writes (file name → what it shows).
 FIGURES = {
     "fig04_ball_displacement_kr.png": "Fig. 4: ball displacement, examples 1-3 (k_r varies)",
@@ -436,7 +438,7 @@ def reproduce(out: str | os.PathLike, *, quick: bool = False, log: Callable[[str
                 claims += coupling_claims(runs, params, reading)
     figures = _write_figures(out, ball, sets[("stiff", "paper")], sets[("literal", "paper")], log)
     summary = os.path.join(out, SUMMARY)
-    with open(summary, "w") as f:
+    with write_atomically(summary) as f:
         f.write(_summary(ball, sets, claims, quick, t1_ball))
     log(f"wrote {summary}")
     log("claims of [K90]:")

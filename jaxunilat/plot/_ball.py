@@ -13,6 +13,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..internal._io import write_atomically
+
 if TYPE_CHECKING:  # matplotlib is imported when a plot is made, not with the package
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
@@ -87,9 +89,12 @@ def plot_ball(
 
 
 def save_figure(fig: Figure, path: str | os.PathLike, *, dpi: int = 120) -> None:
-    """Save a figure with the Agg canvas (no display needed); the format follows the suffix."""
+    """Save a figure with the Agg canvas (no display needed); the format follows the
+    suffix. The file is written whole or not at all (`internal.write_atomically`)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     if not isinstance(fig.canvas, FigureCanvasAgg):
         FigureCanvasAgg(fig)
-    fig.savefig(path, dpi=dpi)
+    suffix = os.path.splitext(os.fspath(path))[1].lstrip(".").lower()
+    with write_atomically(path, "wb") as f:  # never a truncated image
+        fig.savefig(f, format=suffix or None, dpi=dpi)
