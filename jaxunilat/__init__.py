@@ -57,6 +57,7 @@ from ._solver import (  # noqa: E402
     EventRecord as EventRecord,
     Solution as Solution,
     Status as Status,
+    UncheckedStepWarning as UncheckedStepWarning,
     apexes as apexes,
     contact_table as contact_table,
     impact_table as impact_table,

@@ -184,3 +184,21 @@ def test_projection_and_outputs():
     kappa = float(model.kappa)
     np.testing.assert_allclose(model.output("T_xi", t, y), kappa * (5e-4 - delta), rtol=1e-12)
     np.testing.assert_allclose(model.output("T_eta", t, y), kappa * (-4e-4 + delta), rtol=1e-12)
+
+
+def test_rk4_warns_where_it_cannot_check_the_step():
+    """The coupling with Hunt–Crossley has no step limit: RK4 warns, and the warning is
+    earned (a step near the contact time is far off the event mode's solution)."""
+    kv = Coupling.table2(1)
+    hc = Coupling.table2(1, law=ju.HuntCrossley(1.5))
+    y0 = hc.paper_initial_state()
+    name = hc.output_names[0]
+    ref = ju.simulate(hc, y0, 2.0, solver="event", samples=11, outputs=(name,))
+    with pytest.warns(ju.UncheckedStepWarning, match=r"dt = 0\.01 s is not checked.*HuntCrossley"):
+        coarse = ju.simulate(hc, y0, 2.0, solver="rk4", dt=1e-2, samples=11, outputs=(name,))
+    scale = float(np.max(np.abs(np.asarray(ref[name]))))
+    assert float(np.max(np.abs(np.asarray(coarse[name]) - np.asarray(ref[name])))) > 0.2 * scale
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ju.UncheckedStepWarning)
+        ju.simulate(kv, y0, 0.1, solver="rk4", dt=1e-4, samples=11, outputs=(name,))  # checked
+        ju.simulate(ju.Ball.table1(2, law=ju.HuntCrossley(1.5)), [-0.4, -8.0], 0.1, solver="rk4", dt=1e-6)

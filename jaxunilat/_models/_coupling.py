@@ -251,7 +251,10 @@ class Coupling(AbstractModel):
     def rk4_step_limit(self, xp=jnp, y0=None):
         """The largest RK4 step, s, and the joint's contact time, s: a tenth of the
         Kelvin–Voigt contact time of κ, the damping k_r + h and the contact mass J_t/l
-        (see `jaxunilat._models._contact.rk4_step_limit`). `None` for `HuntCrossley`."""
+        (see `jaxunilat._models._contact.rk4_step_limit`). `None` for `HuntCrossley`:
+        its stiffness grows with depth, and the drive's work leaves the deepest
+        penetration without an a-priori bound (`simulate` then warns,
+        `UncheckedStepWarning`)."""
         if not isinstance(self.law, (KelvinVoigt, ClampedKelvinVoigt)):
             return None
         damping = [d for d in (self.k_r, self.h) if d is not None]

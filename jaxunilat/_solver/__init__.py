@@ -17,6 +17,7 @@ from ._settings import RK4 as RK4
 from ._simulate import (
     Solution as Solution,
     Status as Status,
+    UncheckedStepWarning as UncheckedStepWarning,
     simulate as simulate,
     trace_counts as trace_counts,
 )

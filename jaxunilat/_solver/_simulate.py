@@ -6,6 +6,7 @@ import enum
 import functools
 import math
 import re
+import warnings
 from collections import Counter
 
 import diffrax as dfx
@@ -46,6 +47,12 @@ _TRACES: Counter = Counter()
 def trace_counts() -> dict[str, int]:
     """How many times each jitted entry point has been traced in this process."""
     return dict(_TRACES)
+
+
+class UncheckedStepWarning(UserWarning):
+    """`simulate(solver="rk4")` could not check the step against the model's limit
+    (`model.rk4_step_limit()` is None for a model with contacts, e.g. the coupling
+    with `HuntCrossley`, whose driven motion has no a-priori bound on its penetration)."""
 
 
 class Status(enum.IntEnum):
@@ -547,6 +554,15 @@ def _check_rk4_step(model, dt, y0) -> None:
     # On the host: NumPy copies of the leaves (no device dispatch per operation).
     found = jax.tree_util.tree_map(np.asarray, model).rk4_step_limit(np, np.asarray(y0))
     if found is None:
+        if getattr(model, "num_switches", 0) > 0:
+            warnings.warn(
+                f"rk4's step dt = {float(np.max(np.asarray(dt))):g} s is not checked for this "
+                f"{type(model).__name__}: its contact ({type(getattr(model, 'law', None)).__name__}) has no "
+                "known step limit, and a step beyond it runs to wrong values with status SUCCESS; "
+                "compare with solver='event', or use solver='tsit5'",
+                UncheckedStepWarning,
+                stacklevel=3,
+            )
         return
     limit, t_c = (float(v) for v in found)
     step = float(np.max(np.asarray(dt)))
