@@ -100,3 +100,18 @@ def test_traced_coupling_clearance():
 
     out = jax.jit(jax.vmap(status))(jnp.array([0.005, -0.005]))
     assert np.asarray(out).tolist() == [0, ju.Status.INVALID_INPUT]
+
+
+def test_without_throw_the_message_names_each_bad_rows_parameter():
+    """`Solution.message` gives, per distinct failure of a batch, the text `throw=True`
+    would raise (the parameter's name), and the rows it holds for."""
+    rows = [dict(), dict(kappa=-1e4), dict(mass=0.0), dict(kappa=math.nan)]
+    batch = {k: jnp.stack([_params(**r)[k] for r in rows]) for k in GOOD}
+    sol = jax.jit(jax.vmap(_run))(batch)
+    assert np.asarray(sol.reason)[0] == -1 and (np.asarray(sol.reason)[1:] >= 0).all()
+    text = sol.message
+    assert text.count("invalid_input: jaxunilat.simulate: kappa is out of range") == 1
+    assert "(2 of 4 rows)" in text and "mass is out of range" in text and "(1 of 4 rows)" in text
+    assert jax.jit(_run)(_params()).message == "success"
+    overflow = ju.simulate(ju.Ball.table1(2), [-0.4, -8.2], 1.0, solver="event", max_events=4, throw=False)
+    assert overflow.message.startswith("event_overflow: jaxunilat.simulate: more than max_events = 4 events")

@@ -99,6 +99,9 @@ class Solution(eqx.Module):
     - `num_steps`, `num_accepted_steps`, `num_rejected_steps`: solver statistics.
     - `events`: the event mode's `EventRecord` (contact entries and exits, apexes,
       deepest points); `None` for the other solvers.
+    - `reason`: which of `messages` explains a failed status (−1 on success); with
+      `throw=False` under `jax.vmap`, one per row. `message` reads them.
+    - `messages`: the failure messages `throw=True` would raise (static).
     """
 
     ts: Array
@@ -109,6 +112,8 @@ class Solution(eqx.Module):
     num_accepted_steps: Array
     num_rejected_steps: Array
     events: EventRecord | None = None
+    reason: Array | None = None
+    messages: tuple[str, ...] = eqx.field(static=True, default=())
 
     def __getitem__(self, name: str) -> Array:
         return self.ys[name]
@@ -120,9 +125,25 @@ class Solution(eqx.Module):
 
     @property
     def message(self) -> str:
-        """A human-readable description of the status (concrete results only)."""
-        codes = sorted({int(c) for c in np.asarray(self.status).ravel()})
-        return "; ".join(Status(c).name.lower() for c in codes)
+        """A human-readable description of the status (concrete results only): `success`,
+        or each distinct failure with the message `throw=True` would raise, e.g.
+        `invalid_input: jaxunilat.simulate: kappa = ... is out of range ...` (one entry
+        per distinct failure of a batch, with its row count)."""
+        codes = np.asarray(self.status).ravel()
+        reasons = np.full(codes.shape, -1) if self.reason is None else np.asarray(self.reason).ravel()
+        failed = sorted(
+            {(int(c), int(r)) for c, r in zip(codes, reasons, strict=True) if c != Status.SUCCESS}
+        )
+        if not failed:
+            return Status.SUCCESS.name.lower()
+        parts = []
+        for code, reason in failed:
+            text = Status(code).name.lower()
+            if 0 <= reason < len(self.messages):
+                text += ": " + self.messages[reason]
+            rows = int(np.sum((codes == code) & (reasons == reason)))
+            parts.append(text + (f" ({rows} of {codes.size} rows)" if codes.size > 1 else ""))
+        return "; ".join(parts)
 
 
 _FORWARD_ONLY = (
@@ -188,6 +209,8 @@ def _finish(ys, y1, status, settings, throw, ts, stats, events=None, checks=()):
         num_accepted_steps=stats["num_accepted_steps"],
         num_rejected_steps=stats["num_rejected_steps"],
         events=events,
+        reason=jnp.where(status == Status.SUCCESS, -1, reason).astype(jnp.int32),
+        messages=tuple(messages),
     )
 
 
