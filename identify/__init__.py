@@ -38,7 +38,7 @@ from ._import_tables import (  # noqa: E402
     import_video as import_video,
     plot_table_import as plot_table_import,
 )
-from ._plot import plot_fit as plot_fit  # noqa: E402
+from ._plot import plot_fit as plot_fit, plot_restitution_of_fit as plot_restitution_of_fit  # noqa: E402
 from ._problem import NUISANCE as NUISANCE, PARAMETERS as PARAMETERS  # noqa: E402
 from ._qualify import (  # noqa: E402
     DEFAULT_DRAG as DEFAULT_DRAG,

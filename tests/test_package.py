@@ -155,3 +155,32 @@ def test_the_core_does_not_depend_on_its_studies_figures_or_command_line():
                 if parts[0] == "jaxunilat" and (len(parts) < 2 or parts[1] not in ok):
                     offenders.append(f"{path.relative_to(_ROOT)}:{line}: {name}")
     assert offenders == []
+
+
+def test_notebooks_use_only_public_modules():
+    """The notebooks teach the public API: no `jaxunilat._...` or `identify._...` import
+    in any code cell (parsed), and `jaxunilat.bench` importable without scipy."""
+    import ast
+    import json
+
+    offenders = []
+    for path in sorted((_ROOT / "notebooks").glob("*.ipynb")):
+        for cell in json.loads(path.read_text(encoding="utf-8"))["cells"]:
+            if cell["cell_type"] != "code":
+                continue
+            code = "".join(line for line in cell["source"] if not line.lstrip().startswith(("%", "!")))
+            for node in ast.walk(ast.parse(code)):
+                names = []
+                if isinstance(node, ast.Import):
+                    names = [a.name for a in node.names]
+                elif isinstance(node, ast.ImportFrom) and node.module:
+                    names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+                offenders += [
+                    f"{path.name}: {n}" for n in names if any(p.startswith("_") for p in n.split(".")[1:])
+                ]
+    assert offenders == []
+    code = "import sys, jaxunilat.bench; print(sorted(m for m in sys.modules if m.split('.')[0] == 'scipy'))"
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120
+    )
+    assert out.stdout.strip() == "[]"

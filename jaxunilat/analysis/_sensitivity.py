@@ -33,6 +33,7 @@ import numpy as np
 
 from .._solver._simulate import _TRACES
 
+#: The coupling's parameters `coupling_sensitivity` differentiates in, in its table's order.
 COUPLING_PARAMETERS = ("clearance", "alpha", "b", "kappa", "k_r", "h")
 COUPLING_SYMBOLS = {
     "clearance": "Delta",

@@ -2,4 +2,4 @@
 Kukla, Posiadała, Skalmierski & Tylikowski (1990) and a report of which of its claims
 the runs support (`jaxunilat reproduce` on the command line)."""
 
-from ._reproduce import Claim as Claim, Report as Report, reproduce as reproduce
+from ._reproduce import Claim as Claim, Report as Report, coupling_run as coupling_run, reproduce as reproduce

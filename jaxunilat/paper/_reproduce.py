@@ -95,7 +95,14 @@ def _ball_runs(t1):
 
 
 def coupling_run(example, params="stiff", reading="paper", t1=5.0):
-    """One Table 2 run with the shared settings: dict of ts, outputs, X, Y, impact table, peaks."""
+    """One Table 2 run (`example` 1–6, `params` "stiff" or "literal", `reading` "paper" or
+    "rotating", over [0, `t1`] s) with the reproduction's settings.
+
+    **Returns:** a dict: `model`; `ts` (s); `ys`, the outputs by name with the joint's
+    position X, Y (m); `table`, the impact table; `peak`, `peak_xi`, `peak_eta`, the
+    largest |T| (N); `median`, the median impact peak (N); `max_pen`, the deepest
+    penetration in clearances δ.
+    """
     from .._models._coupling import Coupling
     from .._solver._coupling_impacts import impact_table
     from .._solver._simulate import simulate
