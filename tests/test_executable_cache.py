@@ -105,6 +105,10 @@ def test_the_key_covers_values_that_decide_the_program(monkeypatch):
     monkeypatch.delenv("XLA_FLAGS")
     monkeypatch.setattr(_executables, "_SOURCE_DIGEST", ["edited"])
     assert key != call_key("simulate", args, ("x",))
+    monkeypatch.undo()
+    assert key == call_key("simulate", args, ("x",))
+    monkeypatch.setattr(_executables, "_host_cpu", lambda: "another CPU")
+    assert key != call_key("simulate", args, ("x",))
     assert call_key("simulate", (ball, [0.0, 1.0]), ("x",)) is None  # a leaf that is no array
 
 

@@ -12,8 +12,9 @@ The key is a SHA-256 digest of:
 
 - the format below, the versions of jax and jaxlib, and a digest of the jaxunilat
   source files (a new release or an edited checkout never runs a stale program);
-- the backend (platform, device kind, platform version), `XLA_FLAGS`, and JAX's
-  settings other than its caches';
+- the backend (platform, device kind, platform version), the host CPU (its model and
+  instruction-set flags: a cache directory shared between machines never runs code
+  built for another CPU), `XLA_FLAGS`, and JAX's settings other than its caches';
 - the function's name, its static arguments, the arguments' tree structure (which
   holds the models' and settings' static fields) and each leaf's shape, dtype and weak
   type.
@@ -31,6 +32,7 @@ cache, in `<cache dir>/executables`); the Python API and the test suite leave it
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import pickle
@@ -67,6 +69,24 @@ def _source_digest() -> str:
     return _SOURCE_DIGEST[0]
 
 
+@functools.cache
+def _host_cpu() -> str:
+    """The host CPU's model and feature flags (Linux: /proc/cpuinfo), else its architecture."""
+    import platform
+
+    found: dict[str, str] = {}
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
+            for line in f:
+                key, _, value = line.partition(":")
+                key = key.strip()
+                if key in ("model name", "flags", "Features", "CPU implementer", "CPU part"):
+                    found.setdefault(key, value.strip())
+    except OSError:
+        pass
+    return repr((platform.machine(), platform.processor(), sorted(found.items())))
+
+
 def _environment() -> str:
     import jaxlib
 
@@ -81,6 +101,7 @@ def _environment() -> str:
             device.platform,
             device.device_kind,
             device.client.platform_version,
+            _host_cpu(),
             os.environ.get("XLA_FLAGS", ""),
             settings,
         )
@@ -144,7 +165,10 @@ class ExecutableCache:
         except Exception:  # a damaged, truncated or incompatible entry: compile afresh
             _remove(path)
             return None
-        os.utime(path)  # least recently used goes first
+        try:
+            os.utime(path)  # least recently used goes first
+        except OSError:  # removed meanwhile by another process's eviction
+            pass
         self._loaded[key] = compiled
         return compiled
 
