@@ -196,3 +196,21 @@ def test_output_dir_refuses_a_directory_where_it_writes_a_file(name, tmp_path, c
     assert main([name, *extra, "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "--out" in err and blocker in err, err
+
+
+@pytest.mark.parametrize("command", sorted({c for c, f in FLAGS if f == "--plot"}), ids=" ".join)
+def test_plot_in_a_format_matplotlib_cannot_write_is_refused_up_front(command, tmp_path, monkeypatch, capsys):
+    """Every command with --plot refuses an unknown image suffix before any work (exit 2,
+    one line), so a long run never ends in a figure it cannot write."""
+    row = COMMANDS[command]
+    monkeypatch.chdir(tmp_path)
+    inputs = {}
+    for name, kind in row["inputs"].items():
+        inputs[name] = tmp_path / f"input_{name.lower()}{os.path.splitext(kind)[1]}"
+        _make_input(kind, inputs[name])
+    argv = [*command, *(a.format(**{k: str(v) for k, v in inputs.items()}) for a in row["argv"])]
+    code = main([*argv, "--plot", str(tmp_path / "figure.nosuchformat")])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert "unsupported image format 'nosuchformat'" in err and len(err.strip().splitlines()) == 1
+    assert sorted(os.listdir(tmp_path)) == sorted(p.name for p in inputs.values())

@@ -15,6 +15,7 @@ from ._main import (
     RunError,
     UsageError,
     add_solver_knobs,
+    check_plot_format,
     check_solver_knobs,
     count,
     flag_spelling,
@@ -105,6 +106,7 @@ def _run_simulate_coupling(args) -> int:
     model = _build_coupling(args.example, args.params, args.reading, args.h)
     check_solver_knobs(args)
     check_output_paths(("--out", args.out), ("--plot", args.plot))
+    check_plot_format(args.plot)
     # The event mode's budgets are those of `reproduce` and the tests (one compilation) up to
     # 10 s, and grow with t1; RK4's covers t1/dt (one compilation up to 400 000 steps).
     blocks = math.ceil(args.t1 / 10.0)

@@ -86,6 +86,7 @@ def _run_identify(args) -> int:
     from identify import NUISANCE, fit, load_dataset
 
     from ..internal import EXIT_OK, RunError, check_output_paths, write_atomically
+    from ._main import check_plot_format
 
     nuisance = tuple(name.strip() for name in args.fit.split(",") if name.strip())
     for name in nuisance:
@@ -96,6 +97,7 @@ def _run_identify(args) -> int:
     paths = list(args.data) or [default_data_path()]
     inputs = [(f"DATA {i + 1}" if len(paths) > 1 else "DATA", path) for i, path in enumerate(paths)]
     check_output_paths(("--json", args.json), ("--plot", args.plot), inputs=inputs)
+    check_plot_format(args.plot)
     data = [load_dataset(path) for path in paths]
     result = fit(
         data if len(data) > 1 else data[0],

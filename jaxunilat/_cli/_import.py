@@ -117,18 +117,10 @@ def add_import(commands) -> None:
 
 def _run_import(args) -> int:
     from ..internal import EXIT_OK, RunError, check_output_paths
+    from ._main import check_plot_format
 
     check_output_paths(("--out", args.out), ("--plot", args.plot), inputs=(("SOURCE", args.source),))
-    if args.plot is not None:
-        import os
-
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-
-        suffix = os.path.splitext(args.plot)[1].lstrip(".").lower()
-        if suffix and suffix not in FigureCanvasAgg.get_supported_filetypes():
-            raise ValueError(
-                f"--plot {args.plot!r}: unsupported image format {suffix!r}; use e.g. .png, .pdf, .svg"
-            )
+    check_plot_format(args.plot)
     import identify
 
     common = dict(mass=args.mass, drag=args.drag, x0=args.x0, v0=args.v0, noise=args.noise)

@@ -205,14 +205,19 @@ def _check_outputs(args) -> None:
     if args.events is not None and args.solver != "event":
         raise UsageError(f"--events needs --solver event (got --solver {args.solver})")
     check_output_paths(("--out", args.out), ("--plot", args.plot), ("--events", args.events))
-    if args.plot is not None:
-        from matplotlib.backends.backend_agg import FigureCanvasAgg  # ~0.2 s: only when plotting
+    check_plot_format(args.plot)
 
-        suffix = os.path.splitext(args.plot)[1].lstrip(".").lower()
-        if suffix and suffix not in FigureCanvasAgg.get_supported_filetypes():
-            raise ValueError(
-                f"--plot {args.plot!r}: unsupported image format {suffix!r}; use e.g. .png, .pdf, .svg"
-            )
+
+def check_plot_format(path: str | None) -> None:
+    """Refuse a `--plot` file whose suffix matplotlib cannot write, before any work (None:
+    no plot asked for)."""
+    if path is None:
+        return
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # ~0.2 s: only when plotting
+
+    suffix = os.path.splitext(path)[1].lstrip(".").lower()
+    if suffix and suffix not in FigureCanvasAgg.get_supported_filetypes():
+        raise ValueError(f"--plot {path!r}: unsupported image format {suffix!r}; use e.g. .png, .pdf, .svg")
 
 
 def _contact_starts(contact, x):
