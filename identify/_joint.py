@@ -31,6 +31,7 @@ import jax
 import numpy as np
 
 from jaxunilat import hunt_crossley_contact_time
+from jaxunilat.internal import kept_call
 
 from ._initial import CONTACT_TIME_GUESS
 from ._problem import PARAMETERS, Problem, evaluate_rows, stack_problems
@@ -178,7 +179,7 @@ class JointEvaluator:
         oks: list = [None] * self.layout.n_files
         for g in self.groups:
             zs = np.stack([per_file_rows[f] for f in g.files])
-            r, ok = evaluate_rows(g.problem, jax.device_put(zs))
+            r, ok = kept_call("identify.evaluate_rows", evaluate_rows, (g.problem, jax.device_put(zs)))
             r, ok = np.asarray(r), np.asarray(ok)
             for k, f in enumerate(g.files):
                 res[f], oks[f] = r[k, :, : g.rows[k]], ok[k]

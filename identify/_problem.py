@@ -158,7 +158,7 @@ def _nearest(predicted: Array, observed: Array) -> Array:
     return jnp.take(predicted, jnp.argmin(gap, axis=1))
 
 
-@eqx.filter_jit
+@jax.jit
 def evaluate_rows(problem: Problem, zs) -> tuple[Array, Array]:
     """Residuals for each row of `zs`, in one compiled sequential map.
 
@@ -166,6 +166,8 @@ def evaluate_rows(problem: Problem, zs) -> tuple[Array, Array]:
     leaf with a leading file axis) and `zs` has shape (files, rows, 6). This is the
     package's jitted entry point: the fit calls it with a fixed number of rows (each
     file's point and its finite-difference neighbours), so only the first call compiles.
+    Every leaf of `problem` is an array (`stack_problems`), so a plain `jax.jit` suffices,
+    and the command line can keep its executable on disk (`jaxunilat.internal.kept_call`).
     """
     # One flat map over (file, row) pairs: a nested map would keep the inner solves
     # from compiling into one loop kernel each.

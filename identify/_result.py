@@ -296,7 +296,9 @@ class FitResult:
                 f"    fit vs noise       = {verdict} (P(chi2_{g['dof']} >= chi-square) = {g['p_value']:.3g})"
             )
         lines.append(f"    converged          = {self.converged} ({self.message})")
-        lines.append(f"    wall time          = {self.wall_s:.2f} s (including JIT compilation)")
+        lines.append(
+            f"    wall time          = {self.wall_s:.2f} s (including JIT compilation, or loading it from the cache)"
+        )
         return lines
 
     def _report_variables(self) -> list[str]:

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 import jaxunilat as ju
-from jaxunilat._solver import _executables
-from jaxunilat._solver._executables import (
+from jaxunilat.internal import _executables
+from jaxunilat.internal._executables import (
     ExecutableCache,
     call_key,
     disable_executable_cache,
@@ -103,7 +103,7 @@ def test_the_key_covers_values_that_decide_the_program(monkeypatch):
     monkeypatch.setenv("XLA_FLAGS", "--xla_cpu_enable_fast_math=false")
     assert key != call_key("simulate", args, ("x",))
     monkeypatch.delenv("XLA_FLAGS")
-    monkeypatch.setattr(_executables, "_SOURCE_DIGEST", ["edited"])
+    monkeypatch.setattr(_executables, "_SOURCE_DIGEST", {"jaxunilat": "edited"})
     assert key != call_key("simulate", args, ("x",))
     monkeypatch.undo()
     assert key == call_key("simulate", args, ("x",))
@@ -124,15 +124,26 @@ def test_an_unwritable_directory_only_costs_the_cache(tmp_path):
         disable_executable_cache()
 
 
-def test_the_command_lines_second_run_traces_nothing(tmp_path):
+DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data", "drop_trace.csv")
+
+
+@pytest.mark.parametrize(
+    ("argv", "program"),
+    [
+        (["simulate", "ball", "--solver", "event", "--t1", "0.3"], "_solve_batched"),
+        (["identify", DATA, "--starts", "1"], "evaluate_rows"),
+    ],
+    ids=["simulate", "identify"],
+)
+def test_the_command_lines_second_run_traces_nothing(argv, program, tmp_path):
     """Two fresh processes on one cache: the second prints the same results, and JAX
     logs no tracing of the solve (`JAX_LOG_COMPILES`)."""
     environ = {k: v for k, v in os.environ.items() if k != "JAXUNILAT_NO_CACHE"}
     environ.update(JAXUNILAT_CACHE_DIR=str(tmp_path / "cache"), JAX_LOG_COMPILES="1")
-    argv = [sys.executable, "-m", "jaxunilat", "simulate", "ball", "--solver", "event", "--t1", "0.3"]
-    runs = [subprocess.run(argv, capture_output=True, text=True, env=environ, timeout=300) for _ in "12"]
+    command = [sys.executable, "-m", "jaxunilat", *argv]
+    runs = [subprocess.run(command, capture_output=True, text=True, env=environ, timeout=300) for _ in "12"]
     assert all(r.returncode == 0 for r in runs), runs[-1].stderr
-    assert "_solve_batched" in runs[0].stderr and "_solve_batched" not in runs[1].stderr
-    printed = [[line for line in r.stdout.splitlines() if not line.startswith("wall time")] for r in runs]
+    assert program in runs[0].stderr and program not in runs[1].stderr
+    printed = [[line for line in r.stdout.splitlines() if "wall time" not in line] for r in runs]
     assert printed[0] == printed[1]
     assert len(_entries(str(tmp_path / "cache" / "executables"))) == 1

@@ -55,7 +55,7 @@ def _run_bench(args) -> int:
     # processes with a new one).
     import jax
 
-    from .._solver._executables import disable_executable_cache
+    from ..internal._executables import disable_executable_cache
 
     jax.config.update("jax_enable_compilation_cache", False)
     disable_executable_cache()

@@ -1,12 +1,12 @@
 """The command line's persistent caches: a second run skips XLA compilation, and a
-second `simulate` also its tracing.
+second `simulate` or `identify` also its tracing.
 
 Every `jaxunilat` command compiles its solver afresh (1–3 s on 2 cores), more than most
 commands then compute. JAX can keep compiled executables on disk
 (`jax_compilation_cache_dir`), but still traces and lowers a program to find its key
-(about 1 s for the event mode); `simulate`'s top-level calls therefore also keep their
-executables under a key computed before tracing (`jaxunilat._solver._executables`, in
-the `executables` folder). The command line turns both on before anything compiles, in
+(about 1 s for the event mode); `simulate`'s top-level calls and `identify`'s residuals
+therefore also keep their executables under a key computed before tracing
+(`jaxunilat.internal._executables`, in the `executables` folder). The command line turns both on before anything compiles, in
 a user cache directory:
 
 - `$JAXUNILAT_CACHE_DIR` if set, else `$XDG_CACHE_HOME/jaxunilat`, else
@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import os
 
-from .._solver._executables import SUBDIR as EXECUTABLES_SUBDIR, enable_executable_cache
+from ..internal._executables import SUBDIR as EXECUTABLES_SUBDIR, enable_executable_cache
 
 #: Environment variables: the directory, and the opt-out.
 CACHE_DIR_ENV = "JAXUNILAT_CACHE_DIR"

@@ -428,7 +428,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog=PROG,
         description="Differentiable simulation of systems with unilateral constraints [K90].",
         epilog=f"Compiled solvers are cached in {cache_dir()} (${CACHE_DIR_ENV} moves it; --no-cache or "
-        f"{NO_CACHE_ENV}=1 turns it off): a second run skips compilation (simulate: also tracing).",
+        f"{NO_CACHE_ENV}=1 turns it off): a second run skips compilation (simulate, identify: also tracing).",
     )
     parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
     parser.add_argument(

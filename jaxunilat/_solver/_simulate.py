@@ -20,6 +20,7 @@ from jaxtyping import Array, ArrayLike
 from .._models._contact import RK4_STEPS_PER_CONTACT, HuntCrossley
 from .._models._heaviside import Exact
 from .._models._model import AbstractModel
+from ..internal._executables import executable_cache
 from ..internal._validate import (
     InputTypeError,
     as_float_array,
@@ -32,7 +33,6 @@ from ..internal._validate import (
 from ._batching import batching_mode, rowwise_differentiable
 from ._device_cache import DeviceCache
 from ._event import _EV as _EVENT_COLUMNS, EventRecord, event_solve
-from ._executables import executable_cache
 from ._settings import SolverSettings, failure_hints, make_settings
 
 #: The most memory `simulate` lets one run's save times and outputs (or the event

@@ -12,6 +12,7 @@ between releases.
 """
 
 from ._errors import EXIT_OK as EXIT_OK, PROG as PROG, RunError as RunError, UsageError as UsageError
+from ._executables import kept_call as kept_call
 from ._io import (
     check_output_dir as check_output_dir,
     check_output_paths as check_output_paths,

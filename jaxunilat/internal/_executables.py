@@ -1,4 +1,4 @@
-"""Compiled solves kept on disk: the command line's second run skips tracing, lowering
+"""Compiled programs kept on disk: the command line's second run skips tracing, lowering
 and compiling.
 
 JAX's persistent compilation cache (`jax_compilation_cache_dir`) saves the compile, but
@@ -10,8 +10,9 @@ zero-size template of the output's structure. A hit loads it (~0.2 s) and calls 
 
 The key is a SHA-256 digest of:
 
-- the format below, the versions of jax and jaxlib, and a digest of the jaxunilat
-  source files (a new release or an edited checkout never runs a stale program);
+- the format below, the versions of jax and jaxlib, and a digest of the source files
+  of jaxunilat and of the package that defines the function (`identify`'s, say): a new
+  release or an edited checkout never runs a stale program;
 - the backend (platform, device kind, platform version), the host CPU (its model and
   instruction-set flags: a cache directory shared between machines never runs code
   built for another CPU), `XLA_FLAGS`, and JAX's settings other than its caches';
@@ -26,7 +27,9 @@ serialized: `simulate` uses the cache for `throw=False` only. At most `max_entri
 files are kept (the least recently used go first); deleting the directory is always
 safe.
 
-Only the command line turns it on (`enable_executable_cache`, beside the compilation
+Callers: `simulate`'s top-level call, and `identify`'s compiled residuals
+(`kept_call`, for a `jax.jit` function whose arguments' leaves are all arrays). Only the
+command line turns the cache on (`enable_executable_cache`, beside the compilation
 cache, in `<cache dir>/executables`); the Python API and the test suite leave it off.
 """
 
@@ -36,6 +39,7 @@ import functools
 import hashlib
 import os
 import pickle
+import sys
 import tempfile
 from collections.abc import Callable
 from typing import Any
@@ -50,13 +54,14 @@ SUBDIR = "executables"
 #: The default number of entries kept on disk (each ~1–2 MB for the event mode).
 MAX_ENTRIES = 64
 
-_SOURCE_DIGEST: list[str] = []
+_SOURCE_DIGEST: dict[str, str] = {}
 
 
-def _source_digest() -> str:
-    """A digest of every .py file of the installed jaxunilat package (once per process)."""
-    if not _SOURCE_DIGEST:
-        root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+def _source_digest(package: str = "jaxunilat") -> str:
+    """A digest of every .py file of an imported package (once per process and package)."""
+    if package not in _SOURCE_DIGEST:
+        module = sys.modules.get(package)
+        root = os.path.dirname(os.path.abspath(getattr(module, "__file__", None) or __file__))
         digest = hashlib.sha256()
         for folder, dirs, files in os.walk(root):
             dirs.sort()
@@ -65,8 +70,8 @@ def _source_digest() -> str:
                 digest.update(os.path.relpath(path, root).encode())
                 with open(path, "rb") as f:
                     digest.update(f.read())
-        _SOURCE_DIGEST.append(digest.hexdigest())
-    return _SOURCE_DIGEST[0]
+        _SOURCE_DIGEST[package] = digest.hexdigest()
+    return _SOURCE_DIGEST[package]
 
 
 @functools.cache
@@ -97,7 +102,7 @@ def _environment() -> str:
             FORMAT,
             jax.__version__,
             jaxlib.__version__,
-            _source_digest(),
+            _source_digest("jaxunilat"),
             device.platform,
             device.device_kind,
             device.client.platform_version,
@@ -108,17 +113,17 @@ def _environment() -> str:
     )
 
 
-def call_key(name: str, args: tuple, static: tuple) -> str | None:
-    """The cache key of `name(*args, *static)` (`static`: its static arguments), or None
-    where it cannot be written faithfully (a leaf that is not an array, or an address in
-    a repr)."""
+def call_key(name: str, args: tuple, static: tuple, package: str = "jaxunilat") -> str | None:
+    """The cache key of `name(*args, *static)` (`static`: its static arguments; `package`:
+    the one that defines the function, whose source counts too), or None where it cannot
+    be written faithfully (a leaf that is not an array, or an address in a repr)."""
     leaves, tree = jax.tree_util.tree_flatten(args)
     avals = []
     for leaf in leaves:
         if not isinstance(leaf, (jax.Array, np.ndarray)) or isinstance(leaf, jax.core.Tracer):
             return None
         avals.append((leaf.shape, str(leaf.dtype), bool(getattr(leaf, "weak_type", False))))
-    text = repr((name, static, str(tree), avals))
+    text = repr((name, static, str(tree), avals, package, _source_digest(package)))
     if " at 0x" in text:
         return None
     return hashlib.sha256((_environment() + text).encode()).hexdigest()
@@ -138,7 +143,7 @@ class ExecutableCache:
     def call(self, name: str, jitted: Callable, args: tuple, static: tuple):
         """`jitted(*args, *static)`, from a kept executable where there is one (`static`:
         the trailing static arguments)."""
-        key = call_key(name, args, static)
+        key = call_key(name, args, static, _package_of(jitted))
         if key is None:
             return jitted(*args, *static)
         compiled = self._loaded.get(key) or self._load(key, args)
@@ -196,6 +201,11 @@ class ExecutableCache:
             _remove(path)
 
 
+def _package_of(fn) -> str:
+    """The top-level package that defines `fn` (a `jax.jit` function keeps its module)."""
+    return (getattr(fn, "__module__", None) or "jaxunilat").split(".")[0]
+
+
 def _mtime(path: str) -> float:
     try:
         return os.path.getmtime(path)
@@ -228,3 +238,14 @@ def disable_executable_cache() -> None:
 def executable_cache() -> ExecutableCache | None:
     """The process's executable cache, or None when it is off (the default)."""
     return _ACTIVE[0] if _ACTIVE else None
+
+
+def kept_call(name: str, jitted: Callable, args: tuple, static: tuple = ()):
+    """`jitted(*args, *static)`, through the executable cache when it is on.
+
+    `jitted` is a `jax.jit` function whose trailing `static` arguments are static and
+    whose other arguments' leaves are arrays; `name` says what it is in the key (e.g.
+    `"identify.evaluate_rows"`). Its program must have no host callbacks.
+    """
+    cache = executable_cache()
+    return jitted(*args, *static) if cache is None else cache.call(name, jitted, args, static)
