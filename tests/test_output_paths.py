@@ -130,6 +130,20 @@ def _digest(path) -> str:
         return hashlib.sha256(fh.read()).hexdigest()
 
 
+def _command_line(command, tmp_path):
+    """`command`'s arguments before its outputs, with its inputs made in `tmp_path`:
+    (argv, {NAME: path})."""
+    inputs = {}
+    for name, kind in COMMANDS[command]["inputs"].items():
+        inputs[name] = tmp_path / f"input_{name.lower()}{os.path.splitext(kind)[1]}"
+        _make_input(kind, inputs[name])
+    argv = [
+        *command,
+        *(a.format(**{k: str(v) for k, v in inputs.items()}) for a in COMMANDS[command]["argv"]),
+    ]
+    return argv, inputs
+
+
 def _cases():
     for command, flag in FLAGS:
         row = COMMANDS.get(command, {})
@@ -153,13 +167,8 @@ def test_output_flag_refuses_a_collision(command, flag, target, spelling, tmp_pa
             f"{' '.join(command)} {flag} is an output flag with no collision to test: add the command "
             "to COMMANDS (its inputs, its directory outputs), or the flag to INPUT_FLAGS if it is read"
         )
-    row = COMMANDS[command]
     monkeypatch.chdir(tmp_path)
-    inputs = {}
-    for name, kind in row["inputs"].items():
-        inputs[name] = tmp_path / f"input_{name.lower()}{os.path.splitext(kind)[1]}"
-        _make_input(kind, inputs[name])
-    argv = [*command, *(a.format(**{k: str(v) for k, v in inputs.items()}) for a in row["argv"])]
+    argv, inputs = _command_line(command, tmp_path)
     suffix = ".png" if "plot" in flag else ".csv"
     if target == "an existing file":
         victim = tmp_path / "existing.txt"
@@ -202,13 +211,8 @@ def test_output_dir_refuses_a_directory_where_it_writes_a_file(name, tmp_path, c
 def test_plot_in_a_format_matplotlib_cannot_write_is_refused_up_front(command, tmp_path, monkeypatch, capsys):
     """Every command with --plot refuses an unknown image suffix before any work (exit 2,
     one line), so a long run never ends in a figure it cannot write."""
-    row = COMMANDS[command]
     monkeypatch.chdir(tmp_path)
-    inputs = {}
-    for name, kind in row["inputs"].items():
-        inputs[name] = tmp_path / f"input_{name.lower()}{os.path.splitext(kind)[1]}"
-        _make_input(kind, inputs[name])
-    argv = [*command, *(a.format(**{k: str(v) for k, v in inputs.items()}) for a in row["argv"])]
+    argv, inputs = _command_line(command, tmp_path)
     code = main([*argv, "--plot", str(tmp_path / "figure.nosuchformat")])
     err = capsys.readouterr().err
     assert code == 2, err
