@@ -6,8 +6,8 @@ commands then compute. JAX can keep compiled executables on disk
 (`jax_compilation_cache_dir`), but still traces and lowers a program to find its key
 (about 1 s for the event mode); `simulate`'s top-level calls and `identify`'s residuals
 therefore also keep their executables under a key computed before tracing
-(`jaxunilat.internal._executables`, in the `executables` folder). The command line turns both on before anything compiles, in
-a user cache directory:
+(`jaxunilat.internal._executables`, in the `executables` folder). The command line turns
+both on before anything compiles, in a user cache directory:
 
 - `$JAXUNILAT_CACHE_DIR` if set, else `$XDG_CACHE_HOME/jaxunilat`, else
   `~/.cache/jaxunilat`;
@@ -46,7 +46,7 @@ def cache_disabled() -> bool:
 
 def enable_compilation_cache(path: str | None = None) -> str | None:
     """Turn on JAX's persistent compilation cache in `path` (default `cache_dir()`), and
-    `simulate`'s executable cache in its `executables` folder.
+    the executable cache (`simulate`, `identify`'s residuals) in its `executables` folder.
 
     Every compiled program is kept (no minimum compile time or size). Returns the
     directory, or None when `JAXUNILAT_NO_CACHE` is set or the directory cannot be made

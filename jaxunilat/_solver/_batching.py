@@ -23,10 +23,11 @@ comparisons.
 Autodiff: a `custom_vmap` function has a JVP rule (the JVP of its rule), but JAX can
 neither partially evaluate nor transpose it, so it supports forward mode only.
 
-- `autodiff="forward"`: the `custom_vmap` function as is. `jax.jvp` and `jax.jacfwd`
-  inside `jax.vmap` run row by row; `jax.vmap` of `jax.jacfwd` batches in lockstep
-  (its inner tangent `vmap` meets the rule first, with no batched primal: the rule
-  then calls the plain solve, since calling itself there would recurse).
+- `autodiff="forward"`: a `jax.custom_jvp` around it whose rule is the plain solve's own
+  `jax.jvp`. Evaluation runs row by row; `jax.jvp` and `jax.jacfwd`, inside or outside
+  `jax.vmap`, batch the differentiated solve in lockstep (values unchanged). Where only
+  tangents are batched (JAX's JVP of the rule), the rule calls the plain solve, since
+  calling itself there would recurse.
 - `autodiff="reverse"`: a `jax.custom_vjp` around it whose forward and backward
   passes are the plain solve's own `jax.vjp` (the checkpointed loop's, so no extra
   solve). Evaluation runs row by row; `jax.grad` and `jax.vjp`, inside or outside

@@ -20,7 +20,7 @@ from jaxtyping import Array, ArrayLike
 from .._models._contact import RK4_STEPS_PER_CONTACT, HuntCrossley
 from .._models._heaviside import Exact
 from .._models._model import AbstractModel
-from ..internal._executables import executable_cache
+from ..internal._executables import kept_call
 from ..internal._validate import (
     InputTypeError,
     as_float_array,
@@ -343,9 +343,9 @@ def _run(model, y0, t0, t1, ts, settings, outputs, throw):
     it in a host callback's traceback)."""
     args = (model, y0, t0, t1, ts, settings)
     static = (outputs, throw, batching_mode())
-    kept = None if throw else executable_cache()  # throw's errors are host callbacks
     try:
-        sol = _solve(*args, *static) if kept is None else kept.call("simulate", _solve, args, static)
+        # throw's errors are host callbacks, which a kept executable cannot hold.
+        sol = _solve(*args, *static) if throw else kept_call("simulate", _solve, args, static)
         if throw and not isinstance(sol.status, jax.core.Tracer):
             sol.status.block_until_ready()
     except jax.errors.JaxRuntimeError as err:
@@ -576,10 +576,11 @@ def _check_rk4_step(model, dt, y0) -> None:
         return
     # On the host: NumPy copies of the leaves (no device dispatch per operation).
     found = jax.tree_util.tree_map(np.asarray, model).rk4_step_limit(np, np.asarray(y0))
+    step = float(np.max(np.asarray(dt)))
     if found is None:
         if getattr(model, "num_switches", 0) > 0:
             warnings.warn(
-                f"rk4's step dt = {float(np.max(np.asarray(dt))):g} s is not checked for this "
+                f"rk4's step dt = {step:g} s is not checked for this "
                 f"{type(model).__name__}: its contact ({type(getattr(model, 'law', None)).__name__}) has no "
                 "known step limit, and a step beyond it runs to wrong values with status SUCCESS; "
                 "compare with solver='event', or use solver='tsit5'",
@@ -588,7 +589,6 @@ def _check_rk4_step(model, dt, y0) -> None:
             )
         return
     limit, t_c = (float(v) for v in found)
-    step = float(np.max(np.asarray(dt)))
     if not step > limit:
         return
     if math.isfinite(t_c) and limit == t_c / RK4_STEPS_PER_CONTACT:

@@ -40,15 +40,16 @@ import hashlib
 import os
 import pickle
 import sys
-import tempfile
 from collections.abc import Callable
 from typing import Any
 
 import jax
 import numpy as np
 
+from ._io import write_atomically
+
 #: Bumped when the file layout or the key's recipe changes.
-FORMAT = 1
+FORMAT = 2
 #: Where, within the command line's cache directory, the executables go.
 SUBDIR = "executables"
 #: The default number of entries kept on disk (each ~1–2 MB for the event mode).
@@ -92,7 +93,24 @@ def _host_cpu() -> str:
     return repr((platform.machine(), platform.processor(), sorted(found.items())))
 
 
+#: `_environment()`'s text by (XLA_FLAGS, JAX's settings): written once per process and
+#: setting, not on every call (its repr is most of a key's cost).
+_ENVIRONMENTS: dict[tuple, str] = {}
+
+
 def _environment() -> str:
+    """What besides the call decides a compiled program (see the module docstring)."""
+    fingerprint = (os.environ.get("XLA_FLAGS", ""), tuple(jax.config.values.items()))
+    try:
+        return _ENVIRONMENTS[fingerprint]
+    except KeyError:
+        text = _ENVIRONMENTS[fingerprint] = _environment_text(fingerprint[0])
+    except TypeError:  # a setting that cannot be hashed: written afresh
+        text = _environment_text(fingerprint[0])
+    return text
+
+
+def _environment_text(xla_flags: str) -> str:
     import jaxlib
 
     device = jax.devices()[0]
@@ -102,12 +120,10 @@ def _environment() -> str:
             FORMAT,
             jax.__version__,
             jaxlib.__version__,
-            _source_digest("jaxunilat"),
             device.platform,
             device.device_kind,
             device.client.platform_version,
-            _host_cpu(),
-            os.environ.get("XLA_FLAGS", ""),
+            xla_flags,
             settings,
         )
     )
@@ -123,7 +139,8 @@ def call_key(name: str, args: tuple, static: tuple, package: str = "jaxunilat") 
         if not isinstance(leaf, (jax.Array, np.ndarray)) or isinstance(leaf, jax.core.Tracer):
             return None
         avals.append((leaf.shape, str(leaf.dtype), bool(getattr(leaf, "weak_type", False))))
-    text = repr((name, static, str(tree), avals, package, _source_digest(package)))
+    sources = (_source_digest("jaxunilat"), package, _source_digest(package))
+    text = repr((name, static, str(tree), avals, sources, _host_cpu()))
     if " at 0x" in text:
         return None
     return hashlib.sha256((_environment() + text).encode()).hexdigest()
@@ -184,10 +201,8 @@ class ExecutableCache:
             payload, _, _ = serialize_executable.serialize(compiled)
             template = jax.tree_util.tree_map(lambda x: np.zeros(0, x.dtype), out)
             os.makedirs(self.path, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=self.path, suffix=".tmp")
-            with os.fdopen(fd, "wb") as f:
+            with write_atomically(self._file(key), "wb") as f:
                 pickle.dump((payload, template), f, protocol=pickle.HIGHEST_PROTOCOL)
-            os.replace(tmp, self._file(key))
         except Exception:  # a read-only or full disk, or a program that cannot be serialized
             return
         self._evict()
@@ -224,8 +239,9 @@ _ACTIVE: list[ExecutableCache] = []
 
 
 def enable_executable_cache(path: str, max_entries: int = MAX_ENTRIES) -> ExecutableCache:
-    """Keep compiled `simulate` calls in `path` for the rest of the process (the command
-    line does this; see the module docstring)."""
+    """Keep the compiled programs of `kept_call` (`simulate`, `identify`'s residuals) in
+    `path` for the rest of the process (the command line does this; see the module
+    docstring)."""
     _ACTIVE[:] = [ExecutableCache(path, max_entries)]
     return _ACTIVE[0]
 
