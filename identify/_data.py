@@ -553,6 +553,12 @@ def write_dataset(path, dataset: Dataset, *, overwrite: bool = False) -> None:
     if dataset.path is not None and os.path.exists(name) and os.path.exists(dataset.path):
         if os.path.samefile(name, dataset.path):
             raise ValueError(f"{name}: is the file this dataset was read from; refusing to overwrite it")
+    write_text(name, text, overwrite=overwrite)
+
+
+def write_text(name: str, text: str, *, overwrite: bool) -> None:
+    """Write a data file's checked `text` whole (UTF-8, \\n line ends); without
+    `overwrite`, an existing file (also one that appears meanwhile) is a ValueError."""
     try:
         with write_atomically(name, replace=overwrite, encoding="utf-8", newline="\n") as f:
             f.write(text)

@@ -15,7 +15,7 @@ import os
 
 import numpy as np
 
-from ._data import DEFAULT_GRAVITY, Dataset, _parse, format_dataset
+from ._data import DEFAULT_GRAVITY, Dataset, _parse, format_dataset, write_text
 
 #: An ITTF 40 mm table-tennis ball, kg.
 DEFAULT_MASS = 2.7e-3
@@ -121,17 +121,13 @@ class ImportResult:
     def write(self, path, *, overwrite: bool = False) -> None:
         """Write `text()` to `path` (refuses to replace a file unless `overwrite`, and
         never writes over the source)."""
-        from jaxunilat.internal import check_output_paths, write_atomically
+        from jaxunilat.internal import check_output_paths
 
         name = os.fspath(path)
         check_output_paths(("path", name), inputs=(("source", self.source),))
         text = self.text()
         _parse(text, name)  # what is written reads back
-        try:
-            with write_atomically(name, replace=overwrite, encoding="utf-8", newline="\n") as f:
-                f.write(text)
-        except FileExistsError:
-            raise ValueError(f"{name}: the file exists; pass overwrite=True to replace it") from None
+        write_text(name, text, overwrite=overwrite)
 
 
 def _one_line(text: str) -> str:
