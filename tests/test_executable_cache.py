@@ -4,6 +4,7 @@ source gets a new entry; a damaged entry is recompiled; it is never used where i
 cannot be (throw=True, inside a transformation)."""
 
 import os
+import shutil
 import subprocess
 import sys
 
@@ -82,6 +83,30 @@ def test_a_damaged_entry_is_recompiled(cache_dir):
     assert again == name and os.path.getsize(os.path.join(cache_dir, name)) > 1000
 
 
+def test_an_entry_that_loads_but_fails_when_called_is_recompiled(cache_dir, monkeypatch):
+    """An executable can deserialize and still fail on its first call (a copy that lacks
+    some of its code): the entry is deleted, the program compiled afresh and kept anew."""
+    from jax.experimental import serialize_executable
+
+    reference = _simulate()
+    enable_executable_cache(cache_dir)
+    _simulate()
+    (name,) = _entries(cache_dir)
+    os.utime(os.path.join(cache_dir, name), (0, 0))
+
+    def broken(*args, **kwargs):
+        def call(*args):
+            raise RuntimeError("NOT_FOUND: Function fusion not found")
+
+        return call
+
+    monkeypatch.setattr(serialize_executable, "deserialize_and_load", broken)
+    enable_executable_cache(cache_dir)
+    _same(_simulate(), reference)
+    assert _entries(cache_dir) == [name]
+    assert os.path.getmtime(os.path.join(cache_dir, name)) > 0  # written anew
+
+
 def test_never_used_with_throw_or_inside_a_transformation(cache_dir):
     enable_executable_cache(cache_dir)
     _simulate(throw=True)
@@ -136,14 +161,25 @@ DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
     ids=["simulate", "identify"],
 )
 def test_the_command_lines_second_run_traces_nothing(argv, program, tmp_path):
-    """Two fresh processes on one cache: the second prints the same results, and JAX
-    logs no tracing of the solve (`JAX_LOG_COMPILES`)."""
+    """Fresh processes on one cache: a later run prints the same results, and JAX logs no
+    tracing of the solve (`JAX_LOG_COMPILES`). That holds too when the executables were
+    lost while JAX's own compilation cache kept its entries: a program JAX read back from
+    there does not serialize whole on the CPU, so the kept one must be compiled afresh."""
     environ = {k: v for k, v in os.environ.items() if k != "JAXUNILAT_NO_CACHE"}
     environ.update(JAXUNILAT_CACHE_DIR=str(tmp_path / "cache"), JAX_LOG_COMPILES="1")
+    executables = str(tmp_path / "cache" / "executables")
     command = [sys.executable, "-m", "jaxunilat", *argv]
-    runs = [subprocess.run(command, capture_output=True, text=True, env=environ, timeout=300) for _ in "12"]
-    assert all(r.returncode == 0 for r in runs), runs[-1].stderr
-    assert program in runs[0].stderr and program not in runs[1].stderr
+
+    def run():
+        done = subprocess.run(command, capture_output=True, text=True, env=environ, timeout=300)
+        assert done.returncode == 0, done.stderr
+        return done
+
+    runs = [run(), run()]
+    shutil.rmtree(executables)
+    runs += [run(), run()]
+    for first, second in (runs[:2], runs[2:]):
+        assert program in first.stderr and program not in second.stderr
     printed = [[line for line in r.stdout.splitlines() if "wall time" not in line] for r in runs]
-    assert printed[0] == printed[1]
-    assert len(_entries(str(tmp_path / "cache" / "executables"))) == 1
+    assert all(p == printed[0] for p in printed)
+    assert len(_entries(executables)) == 1

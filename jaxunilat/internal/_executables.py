@@ -8,6 +8,13 @@ This cache keys a call *before* tracing, on everything that decides its program,
 keeps the compiled executable (`jax.experimental.serialize_executable`) with a
 zero-size template of the output's structure. A hit loads it (~0.2 s) and calls it.
 
+A kept program is always compiled afresh, never read back from JAX's persistent
+compilation cache: on the CPU (jaxlib 0.10) an executable that JAX deserialized from its
+cache serializes again without the code of some of its fusions, and the copy fails
+when called ("Function ... not found"). `_compile_fresh` gives the compile a key of its
+own in JAX's cache (a compile option at its default value) and writes nothing there.
+A kept entry that loads but fails on its first call is deleted and compiled afresh.
+
 The key is a SHA-256 digest of:
 
 - the format below, the versions of jax and jaxlib, and a digest of the source files
@@ -49,11 +56,15 @@ import numpy as np
 from ._io import write_atomically
 
 #: Bumped when the file layout or the key's recipe changes.
-FORMAT = 2
+FORMAT = 3
 #: Where, within the command line's cache directory, the executables go.
 SUBDIR = "executables"
 #: The default number of entries kept on disk (each ~1–2 MB for the event mode).
 MAX_ENTRIES = 64
+#: A compile option at its default value (it only embeds the HLO in the executable, for
+#: debugging): it changes the key of a kept program's compile in JAX's persistent cache.
+_OWN_KEY_OPTION = {"xla_embed_ir_in_executable": False}
+_MIN_COMPILE_TIME = "jax_persistent_cache_min_compile_time_secs"
 
 _SOURCE_DIGEST: dict[str, str] = {}
 
@@ -163,10 +174,17 @@ class ExecutableCache:
         key = call_key(name, args, static, _package_of(jitted))
         if key is None:
             return jitted(*args, *static)
-        compiled = self._loaded.get(key) or self._load(key, args)
+        compiled = self._loaded.get(key)
         if compiled is not None:
             return compiled(*args)
-        compiled = jitted.lower(*args, *static).compile()
+        compiled = self._load(key, args)
+        if compiled is not None:
+            try:
+                return compiled(*args)
+            except Exception:  # an entry that loads but cannot run: compile afresh
+                del self._loaded[key]
+                _remove(self._file(key))
+        compiled = _compile_fresh(jitted, args, static)
         out = compiled(*args)
         self._loaded[key] = compiled
         self._store(key, compiled, out)
@@ -214,6 +232,20 @@ class ExecutableCache:
         entries.sort(key=_mtime)
         for path in entries[: len(entries) - self.max_entries]:
             _remove(path)
+
+
+def _compile_fresh(jitted: Callable, args: tuple, static: tuple):
+    """`jitted` compiled for `(*args, *static)` by XLA itself, not read back from JAX's
+    persistent compilation cache (whose copies do not serialize whole: see the module
+    docstring). The compile has a key of its own there, and nothing is written under it
+    (the minimum compile time for a write is set to infinity meanwhile)."""
+    lowered = jitted.lower(*args, *static)
+    previous = jax.config.values[_MIN_COMPILE_TIME]
+    jax.config.update(_MIN_COMPILE_TIME, float("inf"))
+    try:
+        return lowered.compile(compiler_options=_OWN_KEY_OPTION)
+    finally:
+        jax.config.update(_MIN_COMPILE_TIME, previous)
 
 
 def _package_of(fn) -> str:
