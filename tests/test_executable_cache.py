@@ -107,6 +107,16 @@ def test_an_entry_that_loads_but_fails_when_called_is_recompiled(cache_dir, monk
     assert os.path.getmtime(os.path.join(cache_dir, name)) > 0  # written anew
 
 
+def test_an_xla_without_the_compile_option_keeps_nothing(cache_dir, monkeypatch):
+    """The kept compile passes an XLA option to stay out of JAX's own cache; an XLA that
+    refuses it still gives the plain call's results, and nothing is kept."""
+    reference = _simulate()
+    monkeypatch.setattr(_executables, "_OWN_KEY_OPTION", {"xla_no_such_option": False})
+    enable_executable_cache(cache_dir)
+    _same(_simulate(), reference)
+    assert _entries(cache_dir) == []
+
+
 def test_never_used_with_throw_or_inside_a_transformation(cache_dir):
     enable_executable_cache(cache_dir)
     _simulate(throw=True)

@@ -185,6 +185,8 @@ class ExecutableCache:
                 del self._loaded[key]
                 _remove(self._file(key))
         compiled = _compile_fresh(jitted, args, static)
+        if compiled is None:  # this XLA refuses the option: a plain call, nothing kept
+            return jitted(*args, *static)
         out = compiled(*args)
         self._loaded[key] = compiled
         self._store(key, compiled, out)
@@ -238,12 +240,15 @@ def _compile_fresh(jitted: Callable, args: tuple, static: tuple):
     """`jitted` compiled for `(*args, *static)` by XLA itself, not read back from JAX's
     persistent compilation cache (whose copies do not serialize whole: see the module
     docstring). The compile has a key of its own there, and nothing is written under it
-    (the minimum compile time for a write is set to infinity meanwhile)."""
+    (the minimum compile time for a write is set to infinity meanwhile). None where XLA
+    refuses the option (a release without it): the caller then keeps nothing."""
     lowered = jitted.lower(*args, *static)
     previous = jax.config.values[_MIN_COMPILE_TIME]
     jax.config.update(_MIN_COMPILE_TIME, float("inf"))
     try:
         return lowered.compile(compiler_options=_OWN_KEY_OPTION)
+    except jax.errors.JaxRuntimeError:  # "No such compile option"
+        return None
     finally:
         jax.config.update(_MIN_COMPILE_TIME, previous)
 
