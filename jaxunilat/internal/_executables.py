@@ -185,7 +185,8 @@ class ExecutableCache:
                 del self._loaded[key]
                 _remove(self._file(key))
         compiled = _compile_fresh(jitted, args, static)
-        if compiled is None:  # this XLA refuses the option: a plain call, nothing kept
+        if compiled is None:  # this XLA refuses the option: plain calls from now on, nothing kept
+            self._loaded[key] = functools.partial(_plain_call, jitted, static)
             return jitted(*args, *static)
         out = compiled(*args)
         self._loaded[key] = compiled
@@ -251,6 +252,10 @@ def _compile_fresh(jitted: Callable, args: tuple, static: tuple):
         return None
     finally:
         jax.config.update(_MIN_COMPILE_TIME, previous)
+
+
+def _plain_call(jitted: Callable, static: tuple, *args):
+    return jitted(*args, *static)
 
 
 def _package_of(fn) -> str:
