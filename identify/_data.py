@@ -46,7 +46,7 @@ import re
 
 import numpy as np
 
-from jaxunilat.internal import write_atomically
+from jaxunilat.internal import special_kind, write_atomically
 
 #: The format version this module reads and writes.
 FORMAT_VERSION = 1
@@ -548,7 +548,8 @@ def write_dataset(path, dataset: Dataset, *, overwrite: bool = False) -> None:
     parent = os.path.dirname(os.path.abspath(name))
     if not os.path.isdir(parent):
         raise ValueError(f"{name}: the directory {parent!r} does not exist")
-    if os.path.exists(name) and not overwrite:
+    streamed = special_kind(name) is not None  # a device or FIFO: written through, never replaced
+    if os.path.exists(name) and not overwrite and not streamed:
         raise ValueError(f"{name}: the file exists; pass overwrite=True to replace it")
     if dataset.path is not None and os.path.exists(name) and os.path.exists(dataset.path):
         if os.path.samefile(name, dataset.path):

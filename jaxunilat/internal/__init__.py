@@ -16,6 +16,7 @@ from ._executables import kept_call as kept_call
 from ._io import (
     check_output_dir as check_output_dir,
     check_output_paths as check_output_paths,
+    special_kind as special_kind,
     write_atomically as write_atomically,
 )
 from ._validate import (

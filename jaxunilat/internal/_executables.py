@@ -53,7 +53,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from ._io import write_atomically
+from ._io import special_kind, write_atomically
 
 #: Bumped when the file layout or the key's recipe changes.
 FORMAT = 3
@@ -197,8 +197,8 @@ class ExecutableCache:
         from jax.experimental import serialize_executable
 
         path = self._file(key)
-        if not os.path.exists(path):
-            return None
+        if not os.path.exists(path) or special_kind(path) is not None:
+            return None  # a device or FIFO planted at an entry's name is never opened (no hang)
         try:
             with open(path, "rb") as f:
                 payload, template = pickle.load(f)
@@ -222,7 +222,7 @@ class ExecutableCache:
             payload, _, _ = serialize_executable.serialize(compiled)
             template = jax.tree_util.tree_map(lambda x: np.zeros(0, x.dtype), out)
             os.makedirs(self.path, exist_ok=True)
-            with write_atomically(self._file(key), "wb") as f:
+            with write_atomically(self._file(key), "wb", special="refuse") as f:
                 pickle.dump((payload, template), f, protocol=pickle.HIGHEST_PROTOCOL)
         except Exception:  # a read-only or full disk, or a program that cannot be serialized
             return

@@ -9,8 +9,12 @@ the old file as it was, never a truncated one.
 from __future__ import annotations
 
 import contextlib
+import errno
+import io
 import os
 import secrets
+import stat
+import time
 from collections.abc import Iterable, Iterator, Sequence
 
 import numpy as np
@@ -27,27 +31,81 @@ def _same_file(a: str, b: str) -> bool:
         return False
 
 
+def special_kind(path: str | os.PathLike) -> str | None:
+    """What `path` names when it exists and is not a regular file or a directory:
+    `"character device"`, `"FIFO"`, `"block device"`, `"socket"` or `"special file"`;
+    None for a regular file, a directory or nothing (symlinks are followed, so
+    `/dev/stdout` is what the process's standard output is)."""
+    try:
+        mode = os.stat(os.fspath(path)).st_mode
+    except OSError:
+        return None
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    if stat.S_ISCHR(mode):
+        return "character device"
+    if stat.S_ISFIFO(mode):
+        return "FIFO"
+    if stat.S_ISBLK(mode):
+        return "block device"
+    if stat.S_ISSOCK(mode):
+        return "socket"
+    return "special file"
+
+
+#: Special files an output may stream into (written through, never renamed over).
+STREAMABLE = ("character device", "FIFO")
+
+
 @contextlib.contextmanager
 def write_atomically(
-    path: str | os.PathLike, mode: str = "w", *, replace: bool = True, **open_args
+    path: str | os.PathLike,
+    mode: str = "w",
+    *,
+    replace: bool = True,
+    special: str = "stream",
+    **open_args,
 ) -> Iterator:
     """Open a temporary file beside `path` for writing; move it into place only when the
     block ends without an error. An interrupt (Ctrl-C) or a failure while writing leaves
     an existing file untouched and no partial one; the temporary file is removed.
 
+    Nothing that is not a regular file is ever renamed over. A character device or a
+    FIFO (`/dev/stdout`, `/dev/null`, a named pipe) is written through instead: the
+    output is kept in memory and written to it in one go when the block ends without
+    an error (a FIFO nobody reads is refused rather than waited on). A block device,
+    a socket or a directory is refused.
+
     **Arguments:**
 
     - `path`: the file to write. A symlink is followed: its target is replaced.
     - `mode`: `"w"` (text) or `"wb"` (bytes).
-    - `replace`: False refuses to replace an existing file: `FileExistsError`, checked
-      again at the moment of the move (a hard link where the file system has them).
+    - `replace`: False refuses to replace an existing regular file: `FileExistsError`,
+      checked again at the moment of the move (a hard link where the file system has
+      them). Writing through to a device or FIFO replaces nothing and is allowed.
+    - `special`: `"stream"` (default) writes through to a character device or FIFO;
+      `"refuse"` raises `ValueError` for them too (caches, which must only hold files).
     - `open_args`: passed to `open`, e.g. `encoding="utf-8", newline="\n"`.
 
     **Yields:** the open file object.
+
+    **Raises:** `ValueError` for a target that must not be written (naming the path
+    and what it is); `FileExistsError` as described under `replace`.
     """
     if mode not in ("w", "wb"):
         raise ValueError(f"mode = {mode!r} is out of range; valid values are 'w' and 'wb'")
+    if special not in ("stream", "refuse"):
+        raise ValueError(f"special = {special!r} is out of range; valid values are 'stream' and 'refuse'")
+    kind = special_kind(path)
+    if kind is not None:
+        if special == "refuse" or kind not in STREAMABLE:
+            raise ValueError(f"output path {os.fspath(path)!r} is a {kind}; give a regular file")
+        with _write_through(os.fspath(path), mode, **open_args) as f:
+            yield f
+        return
     target = os.path.realpath(os.fspath(path))
+    if os.path.isdir(target):
+        raise ValueError(f"output path {os.fspath(path)!r} is a directory; give a file name")
     if not replace and os.path.lexists(target):
         raise FileExistsError(target)
     folder, name = os.path.split(target)
@@ -61,7 +119,56 @@ def write_atomically(
             os.remove(tmp)
 
 
+@contextlib.contextmanager
+def _write_through(path: str, mode: str, **open_args) -> Iterator:
+    """Collect the output in memory; on success write it to the device or FIFO `path`
+    (opened without creating or truncating anything)."""
+    buffer = io.BytesIO()
+    if "b" in mode:
+        yield buffer
+        data = buffer.getvalue()
+    else:
+        text = io.TextIOWrapper(buffer, **open_args)
+        yield text
+        text.flush()
+        data = buffer.getvalue()
+    fd = _open_for_writing(path)
+    try:
+        if stat.S_ISREG(os.fstat(fd).st_mode):  # replaced by a regular file meanwhile
+            raise ValueError(f"output path {path!r} became a regular file while writing; run again")
+        os.set_blocking(fd, True)
+        view = memoryview(data)
+        while view:
+            view = view[os.write(fd, view) :]
+    finally:
+        os.close(fd)
+
+
+#: How long a FIFO may go without a reader before the write is refused, s.
+FIFO_GRACE = 2.0
+
+
+def _open_for_writing(path: str) -> int:
+    """Open a device or FIFO for writing without blocking; a FIFO with no reader is
+    waited for `FIFO_GRACE` seconds (a reader started beside the command), then refused."""
+    deadline = time.monotonic() + FIFO_GRACE
+    while True:
+        try:
+            return os.open(path, os.O_WRONLY | os.O_NOCTTY | os.O_NONBLOCK)
+        except OSError as err:
+            if err.errno != errno.ENXIO:
+                raise
+            if time.monotonic() > deadline:
+                raise ValueError(
+                    f"output path {path!r} is a FIFO that no process is reading "
+                    f"(waited {FIFO_GRACE:g} s); start its reader first"
+                ) from None
+            time.sleep(0.01)
+
+
 def _move(tmp: str, target: str, replace: bool) -> None:
+    if special_kind(target) is not None:  # appeared meanwhile: never rename over it
+        raise ValueError(f"output path {target!r} is a {special_kind(target)}; refusing to replace it")
     if replace:
         os.replace(tmp, target)
         return
@@ -87,8 +194,11 @@ def check_output_path(path: str | os.PathLike, *, inputs: Iterable[str | os.Path
     path = os.fspath(path)
     if os.path.isdir(path):
         raise ValueError(f"output path {path!r} is a directory; give a file name")
+    kind = special_kind(path)
+    if kind is not None and kind not in STREAMABLE:
+        raise ValueError(f"output path {path!r} is a {kind}; give a regular file")
     parent = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(parent):
+    if kind is None and not os.path.isdir(parent):
         raise ValueError(f"output path {path!r}: the directory {parent!r} does not exist")
     for src in inputs:
         if src is not None and _same_file(path, os.fspath(src)):
