@@ -192,7 +192,7 @@ def generate() -> dict[str, Dataset]:
 BOUNCING = dict(mass=2.7e-3, drag=0.12, restitution=0.955, contact_time=0.7e-3, scatter=0.003)
 #: Child seeds (SeedSequence(SEED).spawn(...)) of the raw recordings: the phone drop's e
 #: scatter, its room noise, then one per phyphox export; 0–3 are the data sets above.
-RAW_SEEDS = dict(phone_bounces=4, phone_noise=5, phyphox=(6, 7, 8, 9))
+RAW_SEEDS = dict(phone_bounces=4, phone_noise=5, phyphox=(6, 7, 8, 9, 10))
 
 #: `phone_drop.wav`: 48 kHz, 16-bit PCM, mono, 7.0 s. The ball is released from rest with
 #: its lowest point 250 mm above the floor at t = 0.55 s on the recording's clock.
@@ -228,13 +228,23 @@ PHONE = dict(
 #: point above the floor), each recording with its own clock (the release is at `offset`
 #: on it). The app times each impact to the audio sample (48 kHz): the recorded time is
 #: the onset + offset + N(0, (21 µs)²), rounded to the sample grid, printed to 1 µs.
-#: `bounces` regular rows are written; the 30 cm export then misses a quiet bounce, hears
-#: one more, an echo 130 ms later and the echo's duplicate (interval 0.000).
+#: `bounces` regular rows are written, from bounce `late_start` + 1 (the 12 cm export
+#: starts at bounce 2: the app was started late); the 22 cm export hears a stray onset (a
+#: handling click) `stray_fraction` of the way from bounce `stray_after` to the next one;
+#: the 30 cm export then misses a quiet bounce, hears one more, an echo 130 ms later and
+#: the echo's duplicate. Rows are written as phyphox writes them (`phyphox_text`).
 PHYPHOX = (
     dict(file="phyphox_drop_10cm.csv", x0=0.10, offset=1.8734, bounces=14, sep=",", decimal=".", quote=True),
     dict(file="phyphox_drop_15cm.csv", x0=0.15, offset=0.9412, bounces=14, sep=";", decimal=",", quote=True),
     dict(
-        file="phyphox_drop_22cm.csv", x0=0.22, offset=2.4567, bounces=15, sep="\t", decimal=".", quote=False
+        file="phyphox_drop_22cm.csv",
+        x0=0.22,
+        offset=2.4567,
+        bounces=15,
+        sep="\t",
+        decimal=".",
+        quote=False,
+        stray=dict(after=4, fraction=0.4),
     ),
     dict(
         file="phyphox_drop_30cm.csv",
@@ -245,6 +255,16 @@ PHYPHOX = (
         decimal=".",
         quote=True,
         faulty_ending=dict(echo_delay=0.130),
+    ),
+    dict(
+        file="phyphox_drop_12cm.csv",
+        x0=0.12,
+        offset=0.7321,
+        bounces=13,
+        sep=",",
+        decimal=".",
+        quote=True,
+        late_start=1,
     ),
 )
 PHYPHOX_TIMING = dict(rate=48000, noise=21e-6, decimals=6)
@@ -396,15 +416,17 @@ def _wav_bytes(samples: np.ndarray, rate: int) -> bytes:
 def phyphox_throws(rngs: dict | None = None) -> list[dict]:
     """The phyphox exports' truth and rows, one dict per export (in `PHYPHOX` order).
 
-    **Returns** per export: `onset` (s, recording clock: every true onset up to the last
-    row), `recorded` (s: the times written, row by row), `kind` (per row: "bounce",
-    "echo" or "duplicate"), `bounce` (per row: the true onset's index, -1 for
-    echo/duplicate rows), `missed` (indices of true onsets with no row).
+    **Returns** per export: `onset` (s, recording clock: every true onset from bounce 1
+    up to the last row), `recorded` (s: the times written, row by row), `kind` (per row:
+    "bounce", "stray", "echo" or "duplicate"), `bounce` (per row: the true onset's index,
+    -1 for stray/echo/duplicate rows), `missed` (indices of true onsets with no row,
+    those before a late start included).
     """
     rngs = rngs or _raw_rngs()
     out = []
     for spec, rng in zip(PHYPHOX, rngs["phyphox"], strict=True):
-        total = spec["bounces"] + (2 if "faulty_ending" in spec else 0)
+        late = spec.get("late_start", 0)
+        total = late + spec["bounces"] + (2 if "faulty_ending" in spec else 0)
         fall = math.sqrt(2 * spec["x0"] / GRAVITY)
         # Simulate far enough for `total` onsets (the intervals shrink by about e each bounce).
         horizon = fall + 2 * fall * BOUNCING["restitution"] * total
@@ -415,13 +437,20 @@ def phyphox_throws(rngs: dict | None = None) -> list[dict]:
         timing = PHYPHOX_TIMING
         heard = onset + timing["noise"] * rng.standard_normal(total)
         heard = np.round(heard * timing["rate"]) / timing["rate"]
-        rows, kind, missed = list(heard[: spec["bounces"]]), ["bounce"] * spec["bounces"], []
-        index = list(range(spec["bounces"]))
+        last = late + spec["bounces"]
+        rows, kind = list(heard[late:last]), ["bounce"] * spec["bounces"]
+        index, missed = list(range(late, last)), list(range(late))
+        if "stray" in spec:  # a handling click between two bounces, on the sample grid
+            k = spec["stray"]["after"]  # bounce number (1-based): row k - late - 1 is it
+            at = heard[k - 1] + spec["stray"]["fraction"] * (heard[k] - heard[k - 1])
+            rows.insert(k - late, np.round(at * timing["rate"]) / timing["rate"])
+            kind.insert(k - late, "stray")
+            index.insert(k - late, -1)
         if "faulty_ending" in spec:
-            missed.append(spec["bounces"])  # too quiet: no row
-            rows.append(heard[spec["bounces"] + 1])
+            missed.append(last)  # too quiet: no row
+            rows.append(heard[last + 1])
             kind.append("bounce")
-            index.append(spec["bounces"] + 1)
+            index.append(last + 1)
             echo = (
                 np.round((rows[-1] + spec["faulty_ending"]["echo_delay"]) * timing["rate"]) / timing["rate"]
             )
@@ -443,8 +472,10 @@ def phyphox_throws(rngs: dict | None = None) -> list[dict]:
 
 
 def phyphox_text(throw: dict) -> str:
-    """The export file of one throw: a header row, then event time and interval per row
-    (the first row's interval empty), in the throw's separator and decimal mark."""
+    """The export file of one throw as phyphox's "Acoustic Stopwatch" writes it: a header
+    row, then per row the event time t(k) and the interval to the NEXT event,
+    t(k+1) − t(k) (the difference of the printed times), 0 on the last row; in the
+    throw's separator and decimal mark."""
     spec = throw["spec"]
     sep, dec = spec["sep"], spec["decimal"]
     header = [f'"{h}"' if spec["quote"] else h for h in PHYPHOX_HEADER]
@@ -452,7 +483,7 @@ def phyphox_text(throw: dict) -> str:
     times = throw["recorded"]
     lines = [sep.join(header)]
     for i, t in enumerate(times):
-        cells = [f"{t:.{digits}f}", "" if i == 0 else f"{times[i] - times[i - 1]:.{digits}f}"]
+        cells = [f"{t:.{digits}f}", f"{(times[i + 1] - t) if i + 1 < len(times) else 0.0:.{digits}f}"]
         lines.append(sep.join(c.replace(".", dec) for c in cells))
     return "\r\n".join(lines) + "\r\n"
 

@@ -24,7 +24,14 @@ from ._fit import (  # noqa: E402
     default_optimizer as default_optimizer,
     fit as fit,
 )
-from ._import import ImportResult as ImportResult, Rejected as Rejected  # noqa: E402
+from ._import import (  # noqa: E402
+    ImplausibleRecording as ImplausibleRecording,
+    ImportResult as ImportResult,
+    RatioChain as RatioChain,
+    Rejected as Rejected,
+    bounce_problems as bounce_problems,
+    ratio_chain as ratio_chain,
+)
 from ._import_audio import (  # noqa: E402
     OnsetDetection as OnsetDetection,
     WavAudio as WavAudio,

@@ -45,6 +45,8 @@ import optax
 
 from jaxunilat.internal import check_choice, check_range
 
+from . import _plausible as plausible
+from ._import import ratio_chain
 from ._initial import CONTACT_TIME_GUESS
 from ._joint import Layout
 from ._problem import LAWS, LOG_PARAMETERS, NUISANCE, PARAMETERS
@@ -105,13 +107,17 @@ def _levenberg_marquardt(evaluator, z, free, weights, lo, hi, *, max_iterations,
     less than `xtol`, or the scaled gradient vanishes, or before any trial run when
     even the Gauss–Newton step's predicted decrease of χ² (twice the Newton decrement
     ½gᵀ(JᵀJ)⁻¹g) is below that tolerance: at the optimum, trial steps only measure noise,
-    and each costs a run of every row.
+    and each costs a run of every row. Also converged when `_STALL_STEPS` accepted steps
+    together lowered χ² by less than `_STALL_CHI2` reduced χ²: a creep along a flat
+    valley (a contact time the data hardly see) that moves the estimate by well under
+    one standard error.
     """
     r, jac, ok = evaluator(z)
     if not ok:
         return z, r, jac, math.inf, 0, False, "the simulation failed at the start point"
     cost = 0.5 * float(np.sum((weights * r) ** 2))
     lam = 1e-3
+    history = [cost]
     for it in range(1, max_iterations + 1):
         jw = weights[:, None] * jac[:, [evaluator.free.index(i) for i in free]]
         g = jw.T @ (weights * r)
@@ -144,6 +150,12 @@ def _levenberg_marquardt(evaluator, z, free, weights, lo, hi, *, max_iterations,
                     or 2.0 * decrease <= dchi2 * reduced
                 ):
                     return z, r, jac, cost, it, True, "relative change below tolerance"
+                history.append(cost)
+                if (
+                    len(history) > _STALL_STEPS
+                    and 2.0 * (history[-1 - _STALL_STEPS] - cost) <= _STALL_CHI2 * reduced
+                ):
+                    return z, r, jac, cost, it, True, f"chi-square stalled over {_STALL_STEPS} steps"
                 break
             lam *= 4.0
             if lam > 1e12:
@@ -151,6 +163,9 @@ def _levenberg_marquardt(evaluator, z, free, weights, lo, hi, *, max_iterations,
     return z, r, jac, cost, max_iterations, False, f"max_iterations = {max_iterations} reached"
 
 
+#: The stall test of the LM: over this many accepted steps, a χ² decrease below this
+#: many reduced χ² is convergence.
+_STALL_STEPS, _STALL_CHI2 = 10, 0.1
 _WINDOWS = (0.35, 0.65, 1.0)
 GRADIENTS = ("forward", "reverse")
 
@@ -270,6 +285,7 @@ def fit(
     """
     began = time.perf_counter()
     datasets = _load_all(data)
+    nuisance, offset_note = _default_nuisance(datasets, tuple(nuisance), tuple(freeze))
     opts = _check_arguments(
         datasets, nuisance, freeze, starts, steps, max_iterations, tol, rel_halfwidth, optimizer, method,
         seed, profile, progress, keep_outliers, outlier_threshold, holdout, gradient,
@@ -290,8 +306,27 @@ def fit(
     result = results[chosen]
     result.laws = comparison
     result.law_choice = "auto (lowest BIC)" if law == "auto" else "given"
+    if offset_note:
+        result.notes.append(offset_note)
+    plausible.apply(result)
     result.wall_s = time.perf_counter() - began
     return result
+
+
+def _default_nuisance(datasets, nuisance: tuple, freeze: tuple) -> tuple[tuple, str]:
+    """`nuisance` with the clock offset added where a file holds impact onsets: no
+    recorder knows the release instant, so the offset is always unknown there (hold it
+    with `freeze=("offset",)` when the onsets are timed from the release). Returns the
+    nuisance tuple and a note for the report ("" when nothing was added)."""
+    if "offset" in nuisance or "offset" in freeze:
+        return nuisance, ""
+    if not any(d.observe == "impacts" for d in datasets):
+        return nuisance, ""
+    note = (
+        "clock offset fitted (impact onsets: a recording does not know the release instant; "
+        "hold it with --freeze offset, or freeze=('offset',) in Python, if the onsets are timed from the release)"
+    )
+    return (*nuisance, "offset"), note
 
 
 def _check_arguments(
@@ -414,14 +449,22 @@ def _scatter_model_applies(setup, best: _Point, rows) -> bool:
 
 
 def _use_ratio_residuals(setup, rows) -> None:
-    """Switch every file to the log-ratio rows of `RatioResiduals` (kept rows: not outliers)."""
+    """Switch every file to the log-ratio rows of `RatioResiduals` (kept rows: not outliers).
+
+    A last onset that follows an unheard bounce (its interval spans several flights of
+    the ratio chain) is left out of the log-ratio rows: under restitution scatter the
+    predicted onsets drift, the nearest-onset matching can pair it with the bounce it
+    skipped, and nothing after it would show that. It stays in the data, the onset
+    residuals and the plots.
+    """
     ev = setup.evaluator
-    ev.transforms = {
-        f: RatioResiduals(
-            times=setup.times[f], keep=~rows.outlier[rows.of_file(f)], sigma=float(setup.sigmas[f])
-        )
-        for f in range(setup.layout.n_files)
-    }
+    ev.transforms = {}
+    for f in range(setup.layout.n_files):
+        keep = ~rows.outlier[rows.of_file(f)]
+        kept = np.flatnonzero(keep)
+        if len(kept) >= 4 and ratio_chain(setup.times[f][kept]).spans[-1] > 1:
+            keep[kept[-1]] = False
+        ev.transforms[f] = RatioResiduals(times=setup.times[f], keep=keep, sigma=float(setup.sigmas[f]))
 
 
 def _onset_point(setup, best: _Point, onsets: _Point) -> _Point:
@@ -595,12 +638,33 @@ def alone_restitution(setup, best: _Point, rows, opts) -> list[dict]:
     )
     z = layout.join(list(setup.layout.split(best.z)))
     point = _Point.from_lm(_lm(alone, z, _weights(alone, rows), opts, dchi2=1e-2))
-    # The covariance keeps the prior's rows: one drop alone hardly separates t_c from
-    # the release height and the clock, and e must not inherit that null direction.
-    keep = np.concatenate([rows.fitted, np.ones(len(ev._prior_pairs()), bool)])
-    cov, _ = covariance(point.jac[keep], point.r[keep], sigma_known=setup.sigma_known)
     setup.evaluator.calls += ev.calls
-    return [derived_quantities(alone, point.z, cov, f=f)["restitution"] for f in range(layout.n_files)]
+    return [
+        derived_quantities(alone, point.z, _alone_covariance(alone, point, rows, f), f=f)["restitution"]
+        for f in range(layout.n_files)
+    ]
+
+
+def _alone_covariance(alone, point: _Point, rows, f: int) -> np.ndarray:
+    """File f's block of the "alone" covariance, from its own rows only.
+
+    The files share nothing in the alone layout (the drag is held), so each file's
+    uncertainty comes from its own residual scatter, as a fit of that file alone would
+    give it, not from the scatter pooled over every file. The block keeps the file's
+    prior row: one drop alone hardly separates t_c from the release height and the
+    clock, and e must not inherit that null direction.
+    """
+    ev = alone.evaluator
+    n_data = len(rows.fitted)
+    own = np.arange(n_data)[rows.of_file(f)][rows.fitted[rows.of_file(f)]]
+    prior = [n_data + k for k, (pf, _, _) in enumerate(ev._prior_pairs()) if pf == f]
+    idx = np.concatenate([own, prior]).astype(int)
+    entries = set(int(j) for j in alone.layout.index[f])
+    cols = [k for k, j in enumerate(ev.free) if j in entries]
+    block, _ = covariance(point.jac[np.ix_(idx, cols)], point.r[idx], sigma_known=alone.sigma_known)
+    cov = np.zeros((len(ev.free), len(ev.free)))
+    cov[np.ix_(cols, cols)] = block
+    return cov
 
 
 def _profile_kappa(setup, best, rows, result, opts, points: int = 13):

@@ -66,6 +66,8 @@ class ImportResult:
     - `notes`: facts about defaults and estimates, written as `##` comments.
     - `info`: one-line facts about the source (format, rate, columns, ...).
     - `detection`: the onset detection of a WAV import (`OnsetDetection`), else None.
+    - `problems`: why the onsets are not those of one bouncing ball (`bounce_problems`),
+      kept only because the import was forced; () for a plausible sequence.
     """
 
     dataset: Dataset
@@ -79,6 +81,7 @@ class ImportResult:
     notes: tuple[str, ...] = ()
     info: tuple[str, ...] = ()
     detection: object | None = None
+    problems: tuple[str, ...] = ()
 
     def summary(self) -> str:
         """The report, several lines: source, onsets kept and left out, noise, data set."""
@@ -90,6 +93,7 @@ class ImportResult:
         lines.append(("left out", f"{len(self.rejected)}" + ("" if self.rejected else " (none)")))
         lines += [("  -", r.describe()) for r in self.rejected]
         lines += [("warning", w) for w in self.warnings]
+        lines += [("NOT A BALL", f"{p} (kept because forced)") for p in self.problems]
         if self.noise_estimate is not None:
             unit, scale = ("ms", 1e3) if ds.observe == "impacts" else ("mm", 1e3)
             lines.append(("noise", f"{self.noise_estimate * scale:.4g} {unit} ({self.noise_method})"))
@@ -116,6 +120,7 @@ class ImportResult:
             out.append(f"## timing-noise estimate: {self.noise_estimate:.3g} s ({self.noise_method})")
         out += [f"## left out: {r.describe()}" for r in self.rejected]
         out += [f"## warning: {w}" for w in self.warnings]
+        out += [f"## not a bouncing ball (import forced): {p}" for p in self.problems]
         return [_one_line(line) for line in out]
 
     def write(self, path, *, overwrite: bool = False) -> None:
@@ -179,10 +184,15 @@ def impacts_dataset(
         )
     if x0 is None:
         first = float(times[1] - times[0])
-        x0 = x0_from_first_interval(first)
+        e, why = ASSUMED_RESTITUTION, "assuming"
+        if len(times) >= 3:
+            chain = ratio_chain(times).restitution
+            if math.isfinite(chain) and RESTITUTION_RANGE[0] <= chain <= RESTITUTION_RANGE[1]:
+                e, why = chain, "with the interval ratios'"
+        x0 = x0_from_first_interval(first, restitution=e)
         notes.append(
-            f"x0 = {x0:.6g} m estimated from the first interval {first:.6f} s assuming e = "
-            f"{ASSUMED_RESTITUTION} and no drag (x0 = g T1^2 / (8 e^2)); measure it and pass --x0 if you can"
+            f"x0 = {x0:.6g} m estimated from the first interval {first:.6f} s {why} e = {e:.3f} and no drag "
+            "(x0 = g T1^2 / (8 e^2)); measure it and pass --x0 if you can"
         )
     if v0 is None:
         v0 = 0.0
@@ -285,6 +295,13 @@ def interval_warnings(times: np.ndarray, fit: IntervalFit | None, lines=None) ->
     if fit is None:
         return []
     out = []
+    chain = ratio_chain(times)
+    for k in np.flatnonzero((chain.spans > 1) & fit.inlier):  # a smooth fit can absorb a last one
+        where = f"line {lines[k + 1]}: " if lines is not None else ""
+        out.append(
+            f"{where}interval {fit.interval[k]:.6f} s (onset {k + 1} -> {k + 2}, ending at t = {times[k + 1]:.6f} s) "
+            f"spans {chain.spans[k]} flights of the bounce chain (e = {chain.restitution:.3f}): a missed bounce?"
+        )
     for k in np.flatnonzero(~fit.inlier):
         got, exp = float(fit.interval[k]), float(fit.expected[k])
         ratio = got / exp if exp > 0 else math.inf
@@ -327,3 +344,188 @@ def plot_intervals(ax, times: np.ndarray, *, smooth_label: str, outlier_label: s
             )
     ax.legend(loc="upper right", fontsize=8)
     ax.set_ylabel("interval [ms]")
+
+
+# -- the plausibility gate ------------------------------------------------------------------
+
+#: Most bounces in a row that one interval may span (missed quiet bounces).
+MAX_SPAN = 3
+#: Restitutions a bouncing ball's interval ratios can show (drag-free ratio of flights).
+RESTITUTION_RANGE = (0.1, 0.995)
+#: A ratio whose log departs from the chain's prediction by more than this is broken.
+RATIO_TOLERANCE = 0.15
+
+
+class ImplausibleRecording(ValueError):
+    """The onsets of an import are not those of one bouncing ball.
+
+    - `problems`: the reasons, each one sentence.
+    - `result`: the `ImportResult` that would have been returned (inspect or plot it).
+    """
+
+    def __init__(self, message: str, problems: tuple[str, ...], result=None):
+        super().__init__(message)
+        self.problems = problems
+        self.result = result
+
+
+@dataclasses.dataclass(frozen=True)
+class RatioChain:
+    """A bounce-interval sequence read as one bouncing ball.
+
+    With restitution e and no drag, successive flights shrink by e; an interval that
+    spans m flights (m − 1 bounces went unheard) is the first flight times
+    S(m) = 1 + e + … + e^(m−1).
+
+    - `restitution`: the closed-form e, the median ratio of successive flights (drag-free:
+      drag makes it read a little low), or NaN where no ratio is below 1.
+    - `spans`: flights per interval (1 normal; 2 or 3 after missed bounces).
+    - `mismatch`: per successive pair, |log(observed / predicted)| of the later interval.
+    - `broken`: per pair, whether the mismatch exceeds `RATIO_TOLERANCE`.
+    """
+
+    restitution: float
+    spans: np.ndarray
+    mismatch: np.ndarray
+    broken: np.ndarray
+
+    @property
+    def missed(self) -> int:
+        """The bounces inferred missing between the onsets."""
+        return int(np.sum(self.spans - 1))
+
+
+def _span_sum(m: int, e: float) -> float:
+    return float(sum(e**j for j in range(m)))
+
+
+def ratio_chain(times) -> RatioChain:
+    """Read the onsets `times` (s, increasing, at least 3) as one bouncing ball (see `RatioChain`)."""
+    interval = np.diff(np.asarray(times, dtype=float))
+    ratio = interval[1:] / interval[:-1]
+    decaying = ratio[(ratio > 0) & (ratio < 1)]
+    if len(decaying) == 0:
+        nan = np.full(len(ratio), np.nan)
+        return RatioChain(math.nan, np.ones(len(interval), int), nan, np.ones(len(ratio), bool))
+    e = float(np.median(decaying))
+    # Refine with single-flight ratios only: a missed bounce's pair of ratios is far from e.
+    near = decaying[np.abs(np.log(decaying / e)) <= RATIO_TOLERANCE]
+    e = float(np.median(near)) if len(near) else e
+    spans = np.ones(len(interval), dtype=int)
+    mismatch = np.zeros(len(ratio))
+    for k in range(len(ratio)):
+        unit = interval[k] / _span_sum(spans[k], e) * e ** spans[k]  # the next single flight
+        errors = [abs(math.log(interval[k + 1] / (unit * _span_sum(m, e)))) for m in range(1, MAX_SPAN + 1)]
+        best = int(np.argmin(errors))
+        spans[k + 1], mismatch[k] = best + 1, errors[best]
+    return RatioChain(e, spans, mismatch, mismatch > RATIO_TOLERANCE)
+
+
+def bounce_problems(times) -> list[str]:
+    """Why the onsets `times` (s) cannot be the impacts of one bouncing ball; [] if they can.
+
+    A bouncing ball's flights shrink by a nearly constant ratio (its restitution, read a
+    little low through drag), up to a few missed quiet bounces (an interval spanning 2 or
+    3 flights). Refused: fewer than 3 onsets (nothing to check), intervals that do not
+    decay, a closed-form restitution outside `RESTITUTION_RANGE`, and a ratio chain broken
+    at more than one pair and more than a quarter of them (an interval off the chain's
+    prediction by more than `RATIO_TOLERANCE` in log: a spurious or wrongly timed onset,
+    a second drop, ringing read as bounces).
+    """
+    t = np.asarray(times, dtype=float)
+    if len(t) < 3:
+        return [f"{len(t)} onset(s): a bouncing ball needs at least 3 (two intervals) to be recognised"]
+    interval = np.diff(t)
+    if np.any(interval <= 0):
+        return ["the onset times do not increase"]
+    chain = ratio_chain(t)
+    e = chain.restitution
+    problems = []
+    if not math.isfinite(e) or np.median(interval[1:] / interval[:-1]) >= 1.0:
+        problems.append(
+            f"the intervals do not decay (from {interval[0]:.4f} s to {interval[-1]:.4f} s; "
+            "a bouncing ball's flights only get shorter)"
+        )
+        return problems
+    if not RESTITUTION_RANGE[0] <= e <= RESTITUTION_RANGE[1]:
+        problems.append(
+            f"the interval ratios give a restitution e = {e:.3f}, outside the "
+            f"{RESTITUTION_RANGE[0]:g}-{RESTITUTION_RANGE[1]:g} a bouncing ball can have"
+        )
+    n_broken, n_pairs = int(chain.broken.sum()), len(chain.broken)
+    if n_broken > 1 and n_broken > 0.25 * n_pairs:
+        where = ", ".join(f"{t[k + 1]:.4f} s" for k in np.flatnonzero(chain.broken)[:6])
+        problems.append(
+            f"the interval ratios do not form one bouncing ball's chain (e = {e:.3f}): {n_broken} of "
+            f"{n_pairs} successive intervals are off by more than {100 * RATIO_TOLERANCE:.0f}% even "
+            f"allowing up to {MAX_SPAN - 1} missed bounces in a row (at onsets {where}"
+            f"{', ...' if n_broken > 6 else ''}): spurious onsets, ringing, or several drops?"
+        )
+    elif chain.missed > max(2, 0.3 * len(interval)):
+        problems.append(
+            f"{chain.missed} bounces would be missing between {len(t)} onsets: too few heard to be one ball"
+        )
+    return problems
+
+
+def gate(result: ImportResult, *, force: bool) -> ImportResult:
+    """Return `result` if its onsets are a bouncing ball's (`bounce_problems`); otherwise
+    raise `ImplausibleRecording`, or with `force` return it with `problems` filled in."""
+    problems = tuple(bounce_problems(result.dataset.t))
+    if not problems:
+        return result
+    result = dataclasses.replace(result, problems=problems)
+    if force:
+        return result
+    raise ImplausibleRecording(
+        f"{result.source}: the onsets are not those of one bouncing ball: "
+        + "; ".join(problems)
+        + " (nothing written; look at it with --plot, or keep it anyway with --force)",
+        problems,
+        result,
+    )
+
+
+#: At most this many trailing onsets are left out by `trailing_breaks`.
+MAX_TRAILING = 3
+
+
+def trailing_breaks(times) -> list[tuple[int, str]]:
+    """The trailing onsets that end the sequence off the bouncing ball's chain.
+
+    The end of a real recording is where a ball stops bouncing freely: it is caught,
+    rolls, hits an obstacle, or the recorder hears something else. Where the ratio chain
+    (`ratio_chain`) breaks for the last time (an interval off its prediction by more than
+    `RATIO_TOLERANCE` in log, even allowing missed bounces) within the last
+    `MAX_TRAILING` onsets, the onsets after the break are not bounces of this drop.
+    Returns `(index, reason)` per onset to leave out, last first, never leaving fewer
+    than 4 onsets.
+    """
+    t = np.asarray(times, dtype=float)
+    out: list[tuple[int, str]] = []
+    n = len(t)
+    while n >= 5:
+        chain = ratio_chain(t[:n])
+        broken = np.flatnonzero(chain.broken)
+        if len(broken) == 0:
+            break
+        cut = int(broken[-1]) + 2  # the first onset whose interval broke the chain
+        if cut < 4 or n - cut > MAX_TRAILING - len(out) or _broken_or_not_a_ball(t[:cut]):
+            break
+        e, m = chain.restitution, int(chain.spans[cut - 2])
+        before = float(t[cut - 1] - t[cut - 2])
+        unit = before / _span_sum(m, e) * e**m
+        got = float(t[cut] - t[cut - 1])
+        why = (
+            f"after the last bounce of the chain (t = {t[cut - 1]:.4f} s): the interval {got:.4f} s to the "
+            f"next onset breaks it, where a bounce would give {unit:.4f} s (or {unit * (1 + e):.4f} s after a "
+            "missed one); the ball no longer bounced freely (caught, rolling, hit something?)"
+        )
+        out += [(j, why) for j in range(n - 1, cut - 1, -1)]
+        n = cut
+    return out
+
+
+def _broken_or_not_a_ball(times) -> bool:
+    """Whether `times` break their own ratio chain anywhere or are no bouncing ball."""
+    return bool(ratio_chain(times).broken.any()) or bool(bounce_problems(times))

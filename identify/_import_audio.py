@@ -3,24 +3,26 @@
 `read_wav` reads PCM (16, 24, 32-bit) and IEEE float (32, 64-bit) WAV files, plain or
 WAVE_FORMAT_EXTENSIBLE, mono or stereo (mixed down), 8–96 kHz, with NumPy only.
 
-`detect_onsets` finds the impacts of a bouncing ball:
+`detect_onsets` finds the impacts of one bouncing ball, with one set of defaults for every
+recording (real ones ring for 80-200 ms after each click, start with handling noise, lose
+their last quiet bounces in the noise, clip their first loud clicks):
 
 1. The signal is high-passed causally (each sample minus its prediction from the
    previous millisecond: hum, rumble and DC go; nothing of a click leaks before its
-   start) and its magnitude is the envelope. The noise floor σ is the robust (median
-   absolute deviation) standard deviation of the high-passed signal.
-2. Coarse detection: the envelope exceeds `threshold` × σ; the detector then stays
-   deaf for `dead_time` (echoes and the click's own ringing are one click).
-3. The refined onset is the start of the click, not its peak: going back from the
-   click's peak, the first sample where the envelope is still above
-   max(`rel_level` × that click's own peak, `noise_level` × σ) (short dips below it,
-   under 0.5 ms, are bridged), interpolated linearly between samples. A clipped click
-   is timed by its rise, a quiet late click by a level just above the noise.
-4. Spurious clicks: a click closer than `min_gap` to a louder one is an echo or a
-   double trigger; a click far quieter than its neighbours (peak below `quiet_ratio`
-   × theirs) that lands where no bounce can be (the successive intervals of a ball
-   decay smoothly: with it the ratios break, without it they hold) is rejected.
-   Every rejected click is reported with its reason.
+   start); its magnitude is the envelope. The noise floor σ is measured in the quiet
+   parts of the recording (the quiet 50 ms segments), not its median: ringing fills most
+   of a recording.
+2. Candidates rise from below: the rms of a click's first millisecond is several times
+   the loudest millisecond of the 20 ms before, so the previous click's decaying tail is
+   a decaying threshold and ringing that swells again within it does not count.
+3. The onset is the click's start, not its peak (see `detect_onsets`).
+4. The bounces are the chain of candidates whose successive intervals shrink as a
+   bouncing ball's do (`select_chain`, a dynamic programme keeping the few best chains
+   per state; missed quiet bounces are inferred). A first click that is quieter than
+   the next and off the chain's progression extended back is handling before the drop
+   (`_lead_is_handling`). Where a bounce is inferred missed, a quieter click is sought
+   again near its expected time (a quiet late bounce in the previous click's ringing)
+   and the chain chosen again. Every other candidate is reported with its reason.
 5. The timing noise is the robust scatter of the intervals about a smooth fit of the
    interval sequence, divided by √2 (an interval is a difference of two onsets),
    floored at one sample period.
@@ -37,14 +39,18 @@ import numpy as np
 
 from ._data import read_bytes
 from ._import import (
+    MAX_SPAN,
+    RESTITUTION_RANGE,
+    ImplausibleRecording,
     ImportResult,
     Rejected,
     check_options,
     fit_intervals,
+    gate,
     impacts_dataset,
     interval_warnings,
     plot_intervals,
-    ratio_ok,
+    ratio_chain,
 )
 
 RATE_RANGE = (8000, 96000)
@@ -209,13 +215,16 @@ def envelope(samples: np.ndarray, rate: float) -> np.ndarray:
 class OnsetDetection:
     """What `detect_onsets` found.
 
-    - `rate`: Hz. `noise_floor`: robust σ of the high-passed signal, full-scale units.
-    - `coarse`, `onset`: every detected click's coarse detection and refined onset, s.
-    - `peak`: each click's envelope peak, full-scale units; `clipped`: whether it
-      reached full scale.
-    - `accepted`: which clicks are impacts (bool per click).
+    - `rate`: Hz. `noise_floor`: σ of the high-passed signal in the quiet parts of the
+      recording, full-scale units.
+    - `coarse`, `onset`: every candidate click's coarse detection and refined onset, s.
+    - `peak`: each candidate's envelope peak, full-scale units; `clipped`: whether it
+      reached full scale; `rise`: how many times louder its first millisecond is than the
+      loudest millisecond of the recent past (the rise from below).
+    - `accepted`: which candidates are impacts (bool per candidate).
     - `onsets`: the accepted onsets, s (what the data set holds).
-    - `rejected`: the clicks left out, with reasons.
+    - `missed`: where bounces were inferred missing (too quiet to hear), s, estimated.
+    - `rejected`: the candidates left out, with reasons.
     - `warnings`: suspicious but kept.
     - `timing_noise`: the timing-noise estimate, s; `timing_noise_method`: how.
     - `settings`: the detection settings used.
@@ -233,6 +242,8 @@ class OnsetDetection:
     timing_noise: float
     timing_noise_method: str
     settings: dict
+    rise: np.ndarray | None = None
+    missed: np.ndarray | None = None
 
     @property
     def onsets(self) -> np.ndarray:
@@ -240,96 +251,212 @@ class OnsetDetection:
         return self.onset[self.accepted]
 
 
+#: The detector's defaults (`detect_onsets`): one set for every recording.
+DEFAULTS = dict(threshold=8.0, rise=2.5, dead_time=0.02, min_gap=0.03, rel_level=0.1, noise_level=5.0)
+_LEVEL_WINDOW = 1e-3  # s: a click's level is the rms of its first millisecond
+_PAST_WINDOW = 0.02  # s: the recent past it must rise above
+_HOP = 0.25e-3  # s: the grid the rise is evaluated on
+_PEAK_WINDOW = 5e-3  # s: where a click's peak is sought after its detection
+_LOOKBACK = 2e-3  # s: how far before the detection its start may lie
+_SEGMENT = 0.05  # s: the noise floor is measured per segment of this length...
+_QUIET_PERCENTILE = 10.0  # ...and taken at this percentile of the segments (the quiet ones)
+_START_GUARD = _PAST_WINDOW  # s: a click this close to the recording's start has no past to rise from
+
+
+def noise_floor(env: np.ndarray, rate: float) -> float:
+    """σ of the high-passed signal in the quiet parts of the recording, full-scale units:
+    the robust σ (1.4826 × median |x|) of each `_SEGMENT` s segment, at the
+    `_QUIET_PERCENTILE` percentile over the segments (digital silence left out). Ringing
+    fills most of a bouncing-ball recording; its quietest segments are the noise."""
+    seg = max(16, int(round(_SEGMENT * rate)))
+    m = len(env) // seg
+    blocks = env[: m * seg].reshape(m, seg) if m else env[None, :]
+    sigma = 1.4826 * np.median(blocks, axis=1)
+    sigma = sigma[sigma > 0]
+    if not len(sigma):
+        return float(np.std(env)) or 1e-12
+    return float(np.percentile(sigma, _QUIET_PERCENTILE))
+
+
+def rise_ratio(hp: np.ndarray, rate: float, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    """The rise from below on a 0.25 ms grid: (grid sample indices, ratio).
+
+    ratio = (rms of hp over the next `_LEVEL_WINDOW` s) / max(the largest such rms whose
+    window ends in the `_PAST_WINDOW` s before, σ). A click rises several times above
+    the recent past; the decaying tail of the previous click, and ringing that swells
+    slowly again within it, do not: they are a decaying threshold.
+    """
+    hop = max(1, int(round(_HOP * rate)))
+    w = max(2, int(round(_LEVEL_WINDOW * rate)))
+    cum = np.concatenate([[0.0], np.cumsum(hp * hp)])
+    starts = np.arange(0, max(len(hp) - w + 1, 1), hop)
+    level = np.sqrt(np.maximum(cum[np.minimum(starts + w, len(hp))] - cum[starts], 0.0) / w)
+    k = max(1, int(round(_PAST_WINDOW * rate / hop)))
+    gap = -(-w // hop)
+    padded = np.concatenate([np.zeros(k + gap - 1), level])
+    past = np.lib.stride_tricks.sliding_window_view(padded, k).max(axis=1)[: len(level)]
+    return starts, level / np.maximum(past, sigma)
+
+
+#: Where the chain infers a missed bounce, a click is sought again within this fraction of
+#: a flight of the inferred time, rising at least `GUIDED_RISE` × its recent past (a quiet
+#: late bounce in the previous click's ringing; the chain then decides whether it fits).
+GUIDED_WINDOW, GUIDED_RISE = 0.1, 1.5
+
+
+class _Scan:
+    """The candidate clicks of one recording (samples `x`, envelope `env`, `rate` Hz, noise
+    floor `sigma`, settings `s`): each is (coarse, onset, s; peak; clipped; rise)."""
+
+    def __init__(self, x, env, rate, sigma, s):
+        self.x, self.env, self.rate, self.sigma, self.s = x, env, rate, sigma, s
+        self.starts, self.ratio = rise_ratio(env, rate, sigma)
+
+    def _steps(self, seconds):
+        return max(2, int(round(seconds * self.rate)))
+
+    def clicks(self) -> list:
+        """Every click that rises `rise` × its recent past, one per `dead_time`."""
+        rising = self.ratio >= self.s["rise"]
+        first = np.flatnonzero(rising & ~np.concatenate([[False], rising[:-1]]))
+        dead = int(round(self.s["dead_time"] * self.rate))
+        out, last, floor_end = [], -(10**12), 0
+        for g in first:
+            if self.starts[g] < last + dead:
+                continue  # the same click (its own ringing, a reflection): one click
+            found = self.click(g, rising, floor_end)
+            if found is not None:
+                out.append(found[0])
+                last, floor_end = int(self.starts[g]), found[1]
+        return out
+
+    def click(self, g, rising, floor_end=0):
+        """The candidate rising at grid point g, and its peak's sample (None: lost in the noise)."""
+        env, s, c = self.env, self.s, int(self.starts[g])
+        p = c + int(np.argmax(env[c : c + self._steps(_PEAK_WINDOW + _LEVEL_WINDOW)]))
+        if env[p] < s["threshold"] * self.sigma:
+            return None
+        run_end = g + int(np.argmin(rising[g:])) if not rising[g:].all() else len(rising)
+        lo = max(floor_end, c - self._steps(_LOOKBACK), 1)
+        background = float(np.max(env[max(0, lo - self._steps(0.5 * _PAST_WINDOW)) : lo]))
+        level = max(s["rel_level"] * env[p], s["noise_level"] * self.sigma, background)
+        run = np.flatnonzero(env[lo : p + 1] >= level) + lo
+        gaps = np.flatnonzero(np.diff(run) > max(1, int(round(0.5e-3 * self.rate))))
+        n = int(run[gaps[-1] + 1] if gaps.size else run[0])
+        a, b = env[n - 1], env[n]
+        frac = 1.0 if b <= a else min(max((level - a) / (b - a), 0.0), 1.0)
+        clipped = bool(np.max(np.abs(self.x[c : c + self._steps(_PEAK_WINDOW + _LEVEL_WINDOW)])) >= 0.999)
+        rise = float(np.max(self.ratio[g:run_end]))
+        return (c / self.rate, (n - 1 + frac) / self.rate, float(env[p]), clipped, rise), p
+
+    def near(self, when, width, known):
+        """A quieter click within `width` s of `when` (s), rising `GUIDED_RISE` × its recent
+        past, farther than `dead_time` from every onset in `known` (s); None if none."""
+        inside = np.flatnonzero(np.abs(self.starts / self.rate - when) <= width)
+        if not len(inside):
+            return None
+        top = int(inside[np.argmax(self.ratio[inside])])
+        rising = self.ratio >= GUIDED_RISE
+        if not rising[top]:
+            return None
+        g = top - int(np.argmin(rising[top::-1])) + 1 if not rising[: top + 1].all() else 0
+        found = self.click(g, rising)
+        if found is None or np.min(np.abs(np.asarray(known) - found[0][1])) < self.s["dead_time"]:
+            return None
+        return found[0]
+
+
+def _guided(scan, onset, keep, spans) -> list:
+    """Candidates found again where the chain (kept onsets, `spans`) infers missed bounces."""
+    kept, e = onset[keep], _chain_e(onset[keep])
+    out = []
+    for k in np.flatnonzero(spans > 1):
+        flight = (kept[k + 1] - kept[k]) / spans[k]
+        for when in _missed_times(kept[k : k + 2], spans[k : k + 1], e):
+            found = scan.near(when, GUIDED_WINDOW * flight, np.append(onset, [c[1] for c in out]))
+            if found is not None:
+                out.append(found)
+    return out
+
+
 def detect_onsets(
     samples,
     rate: float,
     *,
-    threshold: float = 8.0,
-    dead_time: float = 0.02,
-    min_gap: float = 0.03,
-    rel_level: float = 0.1,
-    noise_level: float = 5.0,
-    quiet_ratio: float = 0.3,
+    threshold: float | None = None,
+    rise: float | None = None,
+    dead_time: float | None = None,
+    min_gap: float | None = None,
+    rel_level: float | None = None,
+    noise_level: float | None = None,
 ) -> OnsetDetection:
-    """Find the impact onsets (click starts) in a recording (see the module docstring).
+    """Find the impact onsets (click starts) of one bouncing ball in a recording.
 
-    **Arguments:**
+    1. Noise floor σ: the high-passed signal's robust σ in the quietest 50 ms segments
+       (`noise_floor`), not over the whole recording (ringing fills most of it).
+    2. Candidates: clicks that rise from below (`rise_ratio`): the rms of their first
+       millisecond is `rise` times the loudest millisecond of the 20 ms before (so the
+       previous click's tail is a decaying threshold), and their envelope peak exceeds
+       `threshold` σ. A rise within `dead_time` of the previous one is the same click.
+    3. The onset is the start of the click, not its peak: going back from the peak, the
+       first sample where the envelope is still above max(`rel_level` × the peak,
+       `noise_level` σ, the loudest envelope of the 10 ms before), interpolated.
+    4. The bounces are the chain of candidates whose successive intervals shrink as a
+       bouncing ball's do (`select_chain`: successive flight ratios near a slowly drifting
+       restitution, up to 2 missed bounces in a row, loud clicks preferred; a quiet first
+       click off the progression is handling, `_lead_is_handling`). Where it infers a
+       missed bounce, a click rising `GUIDED_RISE` × its past within `GUIDED_WINDOW` of a
+       flight of the expected time is added and the chain chosen again. Everything
+       else is left out with its reason: sound before the drop, ringing and echoes
+       closer than `min_gap` to a kept click, spurious clicks where no bounce can be.
 
-    - `samples`: mono samples, full scale 1.
-    - `rate`: sample rate, Hz (> 0).
-    - `threshold`: coarse detection level, in noise σ (> 0; default 8).
-    - `dead_time`: s after a detection during which no new click starts (≥ 0; default 0.02).
-    - `min_gap`: s; a click closer than this to a louder one is an echo (≥ 0; default 0.03).
-    - `rel_level`: the onset level as a fraction of the click's own peak ((0, 1); default 0.1).
-    - `noise_level`: the onset level's floor, in noise σ (> 0, at most `threshold`; default 5).
-    - `quiet_ratio`: a click quieter than this fraction of its neighbours' peaks may be
-      rejected if it is also misplaced ((0, 1]; default 0.3).
+    **Arguments** (None: the default in `DEFAULTS`, the same for every recording):
 
-    **Returns:** an `OnsetDetection`.
+    - `samples`: mono samples, full scale 1. `rate`: sample rate, Hz (> 0).
+    - `threshold`: the least envelope peak of a click, in noise σ (> 0; default 8).
+    - `rise`: how many times the recent past a click's level must rise (> 1; default 4).
+    - `dead_time`: s after a click's detection in which a new rise is the same click (≥ 0; 0.02).
+    - `min_gap`: s; the shortest interval between bounces: a click closer than this to a
+      kept one is an echo or double trigger (≥ 0; default 0.03).
+    - `rel_level`: the onset level as a fraction of the click's own peak ((0, 1); 0.1).
+    - `noise_level`: the onset level's floor, in noise σ (> 0, at most `threshold`; 5).
+
+    **Returns:** an `OnsetDetection` (every candidate, kept or left out).
     """
     from jaxunilat.internal import check_range
 
+    given = dict(threshold=threshold, rise=rise, dead_time=dead_time, min_gap=min_gap)
+    given.update(rel_level=rel_level, noise_level=noise_level)
+    s = {k: float(DEFAULTS[k] if v is None else v) for k, v in given.items()}
     check_range("rate", rate, lo=0.0, lo_open=True, unit="Hz")
-    check_range("threshold", threshold, lo=0.0, lo_open=True)
-    check_range("dead_time", dead_time, lo=0.0, unit="s")
-    check_range("min_gap", min_gap, lo=0.0, unit="s")
-    check_range("rel_level", rel_level, lo=0.0, hi=1.0, lo_open=True, hi_open=True)
-    check_range("noise_level", noise_level, lo=0.0, hi=threshold, lo_open=True)
-    check_range("quiet_ratio", quiet_ratio, lo=0.0, hi=1.0, lo_open=True)
+    check_range("threshold", s["threshold"], lo=0.0, lo_open=True)
+    check_range("rise", s["rise"], lo=1.0, lo_open=True)
+    check_range("dead_time", s["dead_time"], lo=0.0, unit="s")
+    check_range("min_gap", s["min_gap"], lo=0.0, unit="s")
+    check_range("rel_level", s["rel_level"], lo=0.0, hi=1.0, lo_open=True, hi_open=True)
+    check_range("noise_level", s["noise_level"], lo=0.0, hi=s["threshold"], lo_open=True)
     x = np.asarray(samples, dtype=np.float64)
     if x.ndim != 1 or len(x) < 16:
         raise ValueError(f"samples has shape {x.shape}; expected a 1-D array of at least 16 samples")
     env = envelope(x, rate)
-    sigma = 1.4826 * float(np.median(env))  # the median of |noise| is 0.6745 sigma
-    if not sigma > 0:
-        sigma = float(np.std(env)) or 1e-12
-    settings = dict(
-        threshold=threshold,
-        dead_time=dead_time,
-        min_gap=min_gap,
-        rel_level=rel_level,
-        noise_level=noise_level,
-        quiet_ratio=quiet_ratio,
-    )
-    dead = max(1, int(round(dead_time * rate)))
-    window = max(2, min(dead, int(round(5e-3 * rate))))  # where the click's peak is sought
-    bridge = max(1, int(round(0.5e-3 * rate)))
-    lookback = max(2, int(round(2e-3 * rate)))
-    above = np.flatnonzero(env > threshold * sigma)
-    coarse, onset, peak, clipped = [], [], [], []
-    floor_end = 0
-    i = 0
-    while i < len(above):
-        c = int(above[i])
-        p = c + int(np.argmax(env[c : c + window]))
-        level = max(rel_level * env[p], noise_level * sigma)
-        lo = max(floor_end, c - lookback, 1)
-        run = np.flatnonzero(env[lo : p + 1] >= level) + lo
-        gaps = np.flatnonzero(np.diff(run) > bridge)
-        n = int(run[gaps[-1] + 1] if gaps.size else run[0])
-        a, b = env[n - 1], env[n]
-        frac = 1.0 if b <= a else min(max((level - a) / (b - a), 0.0), 1.0)
-        coarse.append(c / rate)
-        onset.append((n - 1 + frac) / rate)
-        peak.append(float(env[p]))
-        clipped.append(bool(np.max(np.abs(x[c : c + window])) >= 0.999))
-        floor_end = c + window
-        i = int(np.searchsorted(above, c + dead))
-    coarse, onset = np.asarray(coarse, dtype=float), np.asarray(onset, dtype=float)
-    peak, clipped = np.asarray(peak, dtype=float), np.asarray(clipped, dtype=bool)
-    keep, rejected, warnings = _classify(onset, peak, min_gap=min_gap, quiet_ratio=quiet_ratio)
+    sigma = noise_floor(env, rate)
+    scan = _Scan(x, env, rate, sigma, s)
+    cand = scan.clicks()
+    coarse, onset, peak, clipped, rises = np.array(cand, dtype=float).reshape(-1, 5).T
+    keep, spans, rejected = _select(onset, peak, rises, s["min_gap"])
+    more = _guided(scan, onset, keep, spans)
+    if more:  # quiet bounces where the chain inferred missed ones: select again with them
+        cand = sorted(cand + more)
+        coarse, onset, peak, clipped, rises = np.array(cand, dtype=float).T
+        keep, spans, rejected = _select(onset, peak, rises, s["min_gap"])
+    clipped = clipped.astype(bool)
     onsets = onset[keep]
-    fit = fit_intervals(onsets)
-    if fit is not None:
-        noise = max(fit.scatter / math.sqrt(2.0), 1.0 / rate)
-        method = (
-            "robust scatter of the bounce intervals about a smooth fit of the interval sequence, "
-            f"/sqrt(2), floored at one sample = {1e6 / rate:.3g} us"
-        )
-        warnings = warnings + interval_warnings(onsets, fit)
-    else:
-        noise = 1.0 / rate
-        method = "one sample period (too few intervals for a fit of the interval sequence)"
+    missed = _missed_times(onsets, spans, _chain_e(onsets))
+    warnings = []
+    if len(missed):
+        where = ", ".join(f"{m:.4f} s" for m in missed)
+        warnings.append(f"{len(missed)} missed bounce(s) inferred (too quiet to hear) near t = {where}")
+    noise, method, more = _timing_noise(onsets, rate)
     return OnsetDetection(
         rate=float(rate),
         noise_floor=sigma,
@@ -339,99 +466,237 @@ def detect_onsets(
         clipped=clipped,
         accepted=keep,
         rejected=tuple(rejected),
-        warnings=tuple(warnings),
-        timing_noise=float(noise),
+        warnings=tuple(warnings + more),
+        timing_noise=noise,
         timing_noise_method=method,
-        settings=settings,
+        settings=s,
+        rise=rises,
+        missed=missed,
     )
 
 
-def _classify(onset, peak, *, min_gap, quiet_ratio):
-    """Which clicks are impacts: (mask, rejected, warnings)."""
-    keep = np.ones(len(onset), dtype=bool)
-    rejected: list[tuple[int, str]] = []
-    # Echoes and double triggers: closer than min_gap to a kept click; the quieter goes.
-    last = None
-    for j in range(len(onset)):
-        if last is not None and onset[j] - onset[last] < min_gap:
-            gone, other = (j, last) if peak[j] <= peak[last] else (last, j)
-            keep[gone] = False
-            rejected.append(
-                (
-                    gone,
-                    f"echo or double trigger: {abs(onset[j] - onset[last]) * 1e3:.1f} ms from the click at "
-                    f"t = {onset[other]:.6f} s (closer than min-gap {min_gap * 1e3:g} ms) and quieter "
-                    f"(peak {peak[gone] / peak[other]:.0%} of it)",
-                )
-            )
-            if gone == last:
-                last = j
-            continue
-        last = j
-    # Quiet clicks where no bounce can be, one at a time, the quietest first.
-    warned = set()
-    while True:
-        idx = np.flatnonzero(keep)
-        t, pk = onset[idx], peak[idx]
-        worst, worst_ratio, worst_text = None, math.inf, ""
-        for j in range(len(idx)):
-            misplaced, detail = _misplaced(t, j)
-            if not misplaced:
-                continue
-            neighbours = [pk[k] for k in (j - 1, j + 1) if 0 <= k < len(idx)]
-            ratio = pk[j] / min(neighbours)
-            if ratio >= quiet_ratio:
-                if idx[j] not in warned:
-                    warned.add(int(idx[j]))
-                continue
-            if ratio < worst_ratio:
-                worst, worst_ratio, worst_text = j, ratio, detail
-        if worst is None:
-            break
-        keep[idx[worst]] = False
-        rejected.append(
-            (
-                int(idx[worst]),
-                f"spurious click: peak {worst_ratio:.0%} of its neighbours' and it lands where no bounce can be "
-                f"({worst_text})",
-            )
-        )
-    warnings = []
-    for j in sorted(warned):
-        if keep[j]:
-            warnings.append(
-                f"click at t = {onset[j]:.6f} s breaks the interval decay but is as loud as its neighbours; "
-                "kept (a handling noise? check it)"
-            )
-    rejected.sort(key=lambda r: onset[r[0]])
-    return keep, [Rejected(time=float(onset[j]), reason=text) for j, text in rejected], warnings
+def _timing_noise(onsets, rate):
+    """(noise, method, warnings): the robust scatter of the intervals about a smooth fit, /√2."""
+    fit = fit_intervals(onsets)
+    if fit is None:
+        return 1.0 / rate, "one sample period (too few intervals for a fit of the interval sequence)", []
+    method = (
+        "robust scatter of the bounce intervals about a smooth fit of the interval sequence, "
+        f"/sqrt(2), floored at one sample = {1e6 / rate:.3g} us"
+    )
+    return max(fit.scatter / math.sqrt(2.0), 1.0 / rate), method, interval_warnings(onsets, fit)
 
 
-def _misplaced(t: np.ndarray, j: int) -> tuple[bool, str]:
-    """Whether onset j of the sequence `t` lands where no bounce can be, and the evidence."""
+def _chain_e(onsets) -> float:
+    """The chain's restitution (its ratio chain's; 0.9 if undefined)."""
+    e = ratio_chain(onsets).restitution if len(onsets) >= 3 else math.nan
+    return e if math.isfinite(e) else 0.9
+
+
+def _missed_times(onsets, spans, e):
+    """Estimated times of the inferred missed bounces, s: an interval spanning m flights is
+    split like a geometric sequence with restitution `e` (the chain's)."""
+    out = []
+    for k in np.flatnonzero(spans > 1):
+        m = int(spans[k])
+        flights = e ** np.arange(m)
+        out += list(onsets[k] + (onsets[k + 1] - onsets[k]) * np.cumsum(flights)[:-1] / flights.sum())
+    return np.asarray(out)
+
+
+# -- the chain of bounces -----------------------------------------------------------------
+
+#: The longest flight considered, s (a drop from about 11 m).
+MAX_FLIGHT = 3.0
+#: Successive flight ratios: the scale of their scatter (log) and the most they may depart.
+CHAIN_TOLERANCE, CHAIN_LIMIT = 0.05, 0.15
+#: Score of a missed bounce (on top of not hearing it), and how fast the chain's e drifts.
+MISS_COST, DRIFT = 1.0, 0.3
+#: Chains remembered per state (its last two clicks): the best few, not only the best.
+CHAIN_BEAM = 6
+
+
+def _span_sums(e: float) -> np.ndarray:
+    """S(m) = 1 + e + … + e^(m−1) for m = 1 .. MAX_SPAN."""
+    return np.cumsum(e ** np.arange(MAX_SPAN))
+
+
+def _extend(interval, u, e):
+    """Score the next intervals after a chain state (last flight `u`, s; restitution `e`,
+    NaN before the first ratio). Returns (ok, cost, new u, new e, span)."""
+    if not math.isfinite(e):
+        r = interval / u
+        ok = (r >= 0.5) & (r <= 1.0)
+        return ok, np.zeros(len(r)), interval, r, np.ones(len(r), dtype=int)
+    sums = _span_sums(e)
+    mismatch = np.log(interval[None, :] / (u * e * sums[:, None]))
+    span = np.argmin(np.abs(mismatch), axis=0)
+    mis = mismatch[span, np.arange(len(interval))]
+    first = interval / sums[span]
+    new_e = np.exp((1 - DRIFT) * math.log(e) + DRIFT * np.log(first / u))
+    new_e = np.clip(new_e, RESTITUTION_RANGE[0], RESTITUTION_RANGE[1])
+    cost = (mis / CHAIN_TOLERANCE) ** 2 + MISS_COST * span
+    return np.abs(mis) <= CHAIN_LIMIT, cost, first * e**span, new_e, span + 1
+
+
+class _Beam:
+    """The dynamic programme's table: for each state (j, i) (the chain's last two clicks),
+    the `CHAIN_BEAM` best chains ending there (slot r): score, last flight `u` (s),
+    restitution `e` (NaN before the first ratio), the previous state's first click and
+    slot (-1: the chain starts at j), and the flights spanned by the interval j -> i."""
+
+    def __init__(self, t, w, pair):
+        n, k = len(t), CHAIN_BEAM
+        self.t, self.w = t, w
+        self.value = np.full((k, n, n), -np.inf)
+        self.value[0] = np.where(pair, w[:, None] + w[None, :], -np.inf)
+        self.flight = np.broadcast_to(t[None, :] - t[:, None], (k, n, n)).copy()
+        self.rest = np.full((k, n, n), np.nan)
+        self.back = np.full((k, n, n), -1)
+        self.slot = np.zeros((k, n, n), dtype=int)
+        self.span = np.ones((k, n, n), dtype=int)
+
+    def relax(self, j, i, r, min_gap):
+        """Extend chain r of state (j, i) by each later click l, into the worst slot of
+        state (i, l) where it scores better."""
+        t, u = self.t, self.flight[r, j, i]
+        hi = int(np.searchsorted(t, t[i] + min(MAX_FLIGHT, 3.5 * u), side="right"))
+        ls = np.arange(i + 1, hi)
+        ok, cost, new_u, new_e, m = _extend(t[ls] - t[i], u, self.rest[r, j, i])
+        score = self.value[r, j, i] + self.w[ls] - cost
+        worst = np.argmin(self.value[:, i, ls], axis=0)
+        better = ok & (t[ls] - t[i] >= min_gap) & (score > self.value[worst, i, ls])
+        ls, worst = ls[better], worst[better]
+        self.value[worst, i, ls], self.flight[worst, i, ls] = score[better], new_u[better]
+        self.rest[worst, i, ls], self.span[worst, i, ls] = new_e[better], m[better]
+        self.back[worst, i, ls], self.slot[worst, i, ls] = j, r
+
+    def best(self):
+        """(indices, spans) of the best chain in the table."""
+        r, j, i = np.unravel_index(int(np.argmax(self.value)), self.value.shape)
+        chain, spans = [i, j], [self.span[r, j, i]]
+        while self.back[r, j, i] >= 0:
+            r, j, i = self.slot[r, j, i], self.back[r, j, i], j
+            chain.append(j)
+            spans.append(self.span[r, j, i])
+        return np.asarray(chain[::-1]), np.asarray(spans[::-1], dtype=int)
+
+
+def select_chain(times, weight, *, min_gap: float = 0.03) -> tuple[np.ndarray, np.ndarray]:
+    """The bouncing ball among candidate clicks: the best chain by dynamic programming.
+
+    `times`: candidate onsets, s, increasing; `weight`: each one's reward for being kept
+    (≥ 1: louder, sharper clicks more). A chain's successive flights shrink by a ratio
+    that drifts slowly (its restitution); an interval may span up to `MAX_SPAN` flights
+    (missed quiet bounces, each costing `MISS_COST`); a ratio off the chain's by δ (log)
+    costs (δ / `CHAIN_TOLERANCE`)² and is refused beyond `CHAIN_LIMIT`. Intervals are at
+    least `min_gap` and at most `MAX_FLIGHT` s. The state is the last two clicks; each
+    keeps its `CHAIN_BEAM` best chains (the best alone would let a start that scores well
+    early, a knock before the drop, crowd out the true start, whose chain wins later).
+
+    **Returns:** (indices of the chain, flights spanned by each of its intervals).
+    """
+    t, w = np.asarray(times, dtype=float), np.asarray(weight, dtype=float)
     n = len(t)
-    a = t[j] - t[j - 1] if j >= 1 else None
-    b = t[j + 1] - t[j] if j <= n - 2 else None
-    before = t[j - 1] - t[j - 2] if j >= 2 else None
-    after = t[j + 2] - t[j + 1] if j <= n - 3 else None
-    ms = lambda v: f"{v * 1e3:.1f} ms"  # noqa: E731
-    if a is not None and b is not None:
-        with_ = [
-            r for r in (a / before if before else None, b / a, after / b if after else None) if r is not None
-        ]
-        m = a + b
-        without = [r for r in (m / before if before else None, after / m if after else None) if r is not None]
-        if without and not all(ratio_ok(r) for r in with_) and all(ratio_ok(r) for r in without):
-            return True, f"it splits an interval of {ms(m)} into {ms(a)} + {ms(b)}"
-        return False, ""
-    if a is None and b is not None and after is not None:  # the first click
-        if after / b > 1 and not ratio_ok(after / b):
-            return True, f"{ms(b)} before the next click, whose own interval is {ms(after)}"
-        return False, ""
-    if b is None and a is not None and before is not None:  # the last click
-        if a / before < 1 and not ratio_ok(a / before):
-            return True, f"{ms(a)} after the previous click, whose own interval is {ms(before)}"
-    return False, ""
+    if n < 2:
+        return np.arange(n), np.ones(0, dtype=int)
+    gap = t[None, :] - t[:, None]
+    pair = (gap >= min_gap) & (gap <= MAX_FLIGHT)
+    if not pair.any():
+        return np.array([int(np.argmax(w))]), np.ones(0, dtype=int)
+    beam = _Beam(t, w, pair)
+    for i in range(n):
+        for j in np.flatnonzero(pair[:, i]):
+            for r in np.flatnonzero(np.isfinite(beam.value[:, j, i])):
+                beam.relax(j, i, r, min_gap)
+    return beam.best()
+
+
+#: The chain's first click is sound before the drop (handling), not its first bounce, when
+#: it is quieter than the loudest of the next two clicks by L > `LOUDNESS_SCATTER` (log)
+#: and (L / `LOUDNESS_SCATTER`)² + z² > `LEAD_OFF`², z: how far its flight ratio T1/T0 is
+#: off the chain's progression extended back, in units of the chain's own ratio scatter (at
+#: least `RATIO_SCATTER`, log: a real ball's restitution does not repeat better than about
+#: 0.5 % from bounce to bounce). The progression: a line through the next `LEAD_FIT` log
+#: ratios (e drifts with the impact speed). `LOUDNESS_SCATTER`: the scatter (log) of a
+#: click's loudness about its neighbours'.
+LEAD_OFF, LOUDNESS_SCATTER, RATIO_SCATTER, LEAD_FIT = 4.0, 0.35, 0.005, 6
+
+
+def _lead_offset(t, spans) -> float:
+    """z of `LEAD_OFF` for a chain (onsets `t`, s; `spans` of its intervals; 0 if too short)."""
+    m = min(len(t) - 1, LEAD_FIT + 2)
+    if m < 5 or np.any(spans[:m] != 1):
+        return 0.0
+    r = np.diff(np.log(np.diff(t)))
+    step = np.abs(np.diff(r[(spans[1:] == 1) & (spans[:-1] == 1)]))  # at least m - 2 > 2 of them
+    scatter = max(1.4826 * float(np.median(step)) / math.sqrt(2.0), RATIO_SCATTER)
+    k = np.arange(1.0, m - 1)
+    design = np.stack([np.ones_like(k), k], axis=1)
+    coef, *_ = np.linalg.lstsq(design, r[1 : m - 1], rcond=None)
+    spread = 1.0 + float(np.linalg.inv(design.T @ design)[0, 0])  # the line's own error at k = 0
+    return abs(r[0] - coef[0]) / (scatter * math.sqrt(spread))
+
+
+def _lead_is_handling(t, peak, spans) -> bool:
+    """Whether the first click of a chain (onsets `t`, s; `peak`s; `spans` of its intervals)
+    is handling before the drop rather than its first bounce (see `LEAD_OFF`). The first
+    bounce is the fastest impact, so the loudest or near it, and on the chain's progression;
+    a knock before the release is typically quieter, and off it."""
+    if len(t) < 4:
+        return False
+    quieter = math.log(np.max(peak[1:3]) / peak[0]) / LOUDNESS_SCATTER
+    return quieter > 1.0 and quieter**2 + _lead_offset(t, spans) ** 2 > LEAD_OFF**2
+
+
+def _select(onset, peak, rises, min_gap):
+    """Which candidates are bounces: (mask, spans of the kept intervals, rejected)."""
+    n = len(onset)
+    keep = np.zeros(n, dtype=bool)
+    early = onset < _START_GUARD
+    idx = np.flatnonzero(~early)
+    weight = 1.0 + 0.5 * np.log10(np.maximum(rises[idx], 1.0)) + 0.25 * np.log10(peak[idx] / peak.max())
+    chain, spans = select_chain(onset[idx], np.maximum(weight, 0.5), min_gap=min_gap)
+    while _lead_is_handling(onset[idx[chain]], peak[idx[chain]], spans):
+        chain, spans = chain[1:], spans[1:]
+    keep[idx[chain]] = True
+    rejected = [
+        Rejected(float(onset[j]), _why(j, onset, peak, keep, min_gap)) for j in range(n) if not keep[j]
+    ]
+    return keep, spans, rejected
+
+
+def _why(j, onset, peak, keep, min_gap):
+    """Why candidate j is not a bounce, in words."""
+    kept = np.flatnonzero(keep)
+    t = onset[j]
+    if t < _START_GUARD:
+        return (
+            f"at the start of the recording ({t * 1e3:.1f} ms in): no quiet before it to rise from, so "
+            "not a bounce's onset (a click already under way, or the recorder starting)"
+        )
+    if not len(kept) or t < onset[kept[0]]:
+        return "sound before the drop (handling, the release): before the first bounce of the chain"
+    before = kept[kept < j]
+    prev = int(before[-1])
+    dt = t - onset[prev]
+    if dt < min_gap:
+        return (
+            f"echo or double trigger: {dt * 1e3:.1f} ms after the click at t = {onset[prev]:.6f} s (closer "
+            f"than min-gap {min_gap * 1e3:g} ms; peak {peak[j] / peak[prev]:.0%} of it): its ringing"
+        )
+    if t > onset[kept[-1]]:
+        return (
+            "after the last bounce of the chain (the ball at rest, or a later noise): no bounce can be there"
+        )
+    nxt = int(kept[kept > j][0])
+    ratio = peak[j] / min(peak[prev], peak[nxt])
+    return (
+        f"spurious click: peak {ratio:.0%} of its neighbours' and it lands where no bounce can be (it splits "
+        f"the interval {onset[nxt] - onset[prev]:.4f} s between the bounces at {onset[prev]:.4f} and "
+        f"{onset[nxt]:.4f} s into {dt * 1e3:.1f} + {(onset[nxt] - t) * 1e3:.1f} ms; the ball's intervals "
+        "decay smoothly): ringing or another noise"
+    )
 
 
 # -- import ------------------------------------------------------------------------------
@@ -445,9 +710,11 @@ def import_wav(
     x0: float | None = None,
     v0: float | None = None,
     noise: float | None = None,
-    threshold: float = 8.0,
-    dead_time: float = 0.02,
-    min_gap: float = 0.03,
+    force: bool = False,
+    threshold: float | None = None,
+    dead_time: float | None = None,
+    min_gap: float | None = None,
+    rise: float | None = None,
 ) -> ImportResult:
     """Impact onsets from a WAV recording of a bouncing ball, as an impacts data set.
 
@@ -458,20 +725,26 @@ def import_wav(
     - `x0`: the release height, m (default: estimated from the first interval assuming
       e = 0.95 and no drag, x0 = g T1²/(8 e²)). `v0`: m/s (default 0).
     - `noise`: the onset-time standard deviation, s (default: the timing-noise estimate).
-    - `threshold`, `dead_time`, `min_gap`: the detector's settings (`detect_onsets`).
+    - `force`: return the import even when its onsets are not one bouncing ball's
+      (`gate`); by default that raises `ImplausibleRecording`.
+    - `threshold`, `dead_time`, `min_gap`, `rise`: the detector's settings
+      (`detect_onsets`; None: its defaults, which work for every recording).
 
     **Returns:** an `ImportResult` (the data set, the accepted and rejected onsets with
     reasons, the timing-noise estimate, `summary()`).
     """
     check_options(mass=mass, drag=drag, x0=x0, v0=v0, noise=noise)
     audio = read_wav(path)
-    det = detect_onsets(audio.samples, audio.rate, threshold=threshold, dead_time=dead_time, min_gap=min_gap)
+    det = detect_onsets(
+        audio.samples, audio.rate, threshold=threshold, dead_time=dead_time, min_gap=min_gap, rise=rise
+    )
     onsets = det.onsets
     name = os.fspath(path)
+    s = det.settings
     if len(onsets) < 2:
         raise ValueError(
             f"{name}: {len(det.onset)} click(s) detected, {len(onsets)} kept; need at least 2 impacts "
-            f"(noise floor {det.noise_floor:.3g} of full scale; try a lower --threshold than {threshold:g})"
+            f"(noise floor {det.noise_floor:.3g} of full scale; try a lower --threshold than {s['threshold']:g})"
         )
     ds, notes = impacts_dataset(
         onsets,
@@ -489,13 +762,14 @@ def import_wav(
     clipped = int(np.sum(det.clipped & det.accepted))
     info = (
         audio.describe(),
-        f"noise floor {det.noise_floor:.3g} of full scale; {len(det.onset)} clicks detected "
-        f"(threshold {threshold:g} sigma, dead time {dead_time * 1e3:g} ms, min gap {min_gap * 1e3:g} ms), "
-        f"{clipped} clipped",
+        f"noise floor {det.noise_floor:.3g} of full scale (its quiet parts); {len(det.onset)} candidate clicks "
+        f"rising {s['rise']:g}x from below and above {s['threshold']:g} sigma (dead time "
+        f"{s['dead_time'] * 1e3:g} ms), {len(onsets)} on the bouncing ball's chain (min gap "
+        f"{s['min_gap'] * 1e3:g} ms), {len(det.missed)} missed bounce(s) inferred, {clipped} clipped",
         f"refined onset - coarse detection: {np.min(shift):+.3f} to {np.max(shift):+.3f} ms "
         f"(median {np.median(shift):+.3f} ms)",
     )
-    return ImportResult(
+    result = ImportResult(
         dataset=ds,
         importer="wav",
         source=name,
@@ -508,6 +782,46 @@ def import_wav(
         info=info,
         detection=det,
     )
+    result = gate(result, force=force)
+    extra = tuple(second_sequence(det))
+    if not extra:
+        return result
+    result = dataclasses.replace(result, problems=result.problems + extra)
+    if force:
+        return result
+    raise ImplausibleRecording(
+        f"{name}: the onsets are not those of one bouncing ball: "
+        + "; ".join(extra)
+        + " (nothing written; look at it with --plot, or keep it anyway with --force)",
+        extra,
+        result,
+    )
+
+
+#: A second chain of at least this many left-out clicks, this loud (× the kept clicks'
+#: median peak), is a second bouncing sequence.
+SECOND_CHAIN = (5, 0.2)
+
+
+def second_sequence(det: OnsetDetection) -> list[str]:
+    """Why the recording holds more than one bouncing ball ([] if it does not): the
+    candidates left out (the start of the recording aside) themselves hold a chain of at
+    least `SECOND_CHAIN[0]` clicks as loud as `SECOND_CHAIN[1]` × the kept ones (several
+    drops, or clicks that are not a ball at all: then any chain is one of many)."""
+    out = np.flatnonzero(~det.accepted & (det.onset >= _START_GUARD))
+    if len(out) < SECOND_CHAIN[0] or not det.accepted.any():
+        return []
+    weight = 1.0 + 0.5 * np.log10(np.maximum(det.rise[out], 1.0))
+    chain, _ = select_chain(det.onset[out], weight, min_gap=det.settings["min_gap"])
+    loud = np.median(det.peak[out[chain]]) >= SECOND_CHAIN[1] * np.median(det.peak[det.accepted])
+    if len(chain) < SECOND_CHAIN[0] or not loud:
+        return []
+    t = det.onset[out[chain]]
+    return [
+        f"the clicks left out hold another bouncing sequence of {len(chain)} clicks ({t[0]:.3f}-{t[-1]:.3f} s) "
+        f"besides the one kept ({det.onsets[0]:.3f}-{det.onsets[-1]:.3f} s): several drops in one recording, "
+        "or clicks that are not one ball"
+    ]
 
 
 def plot_detection(result: ImportResult, *, samples=None, title: str | None = None):

@@ -1,11 +1,23 @@
 """The data against the fit: residuals per file with the excluded rows marked, and for
-impact onsets the plot people look at first, restitution against impact speed."""
+impact onsets the plot people look at first, restitution against impact speed.
+
+Figures stay readable from one file to dozens: no legend sits over the data (the legend
+of the markers goes below the axes, the key of the files to their right: a legend of
+file names up to `MANY_FILES` files, beyond that a colour bar of the release height),
+held-out rows are open circles and outliers red crosses, and residuals beyond the axis
+of the kept rows are drawn at its edge instead of squashing it.
+"""
 
 from __future__ import annotations
 
 import os
 
 import numpy as np
+
+#: Up to this many files the figure names every file in a legend; beyond, a colour bar.
+MANY_FILES = 10
+#: Outlier marker colour (matplotlib's "C3", red).
+OUTLIER = "C3"
 
 
 def _label(d, f: int) -> str:
@@ -27,6 +39,88 @@ def _files(result):
     return out
 
 
+class _Key:
+    """Each file's colour and the figure's key to them: a legend of names, or a colour bar
+    of the release height x0 (mm; of the file number when every file has the same x0)."""
+
+    def __init__(self, result):
+        files = result.file_table() if result.datasets else None
+        datasets = result.datasets_data or [result.data]
+        self.names = [_label(d, f) for f, d in enumerate(datasets)]
+        self.n = len(datasets)
+        if files is not None:
+            heights = np.asarray([f["x0"]["value"] for f in files], dtype=float) * 1e3
+        else:
+            heights = np.asarray([float(d.x0) for d in datasets]) * 1e3
+        self.by_height = bool(np.ptp(heights) > 0)
+        self.values = heights if self.by_height else np.arange(1, self.n + 1, dtype=float)
+        self.scale = self.n > MANY_FILES
+        if self.scale:
+            from matplotlib import colormaps
+            from matplotlib.colors import Normalize
+
+            lo, hi = float(np.min(self.values)), float(np.max(self.values))
+            self.norm = Normalize(lo, hi if hi > lo else lo + 1.0)
+            self.cmap = colormaps["viridis"]
+            self.colours = [self.cmap(self.norm(v)) for v in self.values]
+        else:
+            self.colours = [f"C{f % 10}" for f in range(self.n)]
+
+    def draw(self, fig, axes) -> None:
+        """The files' key to the right of `axes` (nothing for a single file)."""
+        if self.n < 2:
+            return
+        if self.scale:
+            from matplotlib.cm import ScalarMappable
+
+            mappable = ScalarMappable(norm=self.norm, cmap=self.cmap)
+            label = "release height x0 [mm]" if self.by_height else "file number"
+            bar = fig.colorbar(mappable, ax=axes, location="right", shrink=0.9, pad=0.01, aspect=30)
+            bar.set_label(f"file: {label} ({self.n} files)")
+            return
+        from matplotlib.lines import Line2D
+
+        handles = [
+            Line2D([], [], ls="none", marker="o", ms=5, color=c, label=name)
+            for c, name in zip(self.colours, self.names, strict=True)
+        ]
+        fig.legend(handles=handles, loc="outside right upper", fontsize=8, title="file", title_fontsize=8)
+
+
+def _style_legend(
+    fig, *, laws=(), held_out: bool, outliers: bool, trace: bool = False, row_label: str = "fitted row"
+) -> None:
+    """The markers' (and the law curves') legend, one row below the axes."""
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], color=c, ls=ls, lw=1.5, label=name) for name, c, ls in laws]
+    handles.append(
+        Line2D([], [], ls="none", marker="." if trace else "o", ms=5, color="0.35", label=row_label)
+    )
+    if held_out:
+        handles.append(
+            Line2D(
+                [],
+                [],
+                ls="none",
+                marker="o",
+                ms=6,
+                mfc="none",
+                mew=1.2,
+                color="0.35",
+                label="held-out row (predicted, not fitted)",
+            )  # fmt: skip
+        )
+    if outliers:
+        handles.append(
+            Line2D([], [], ls="none", marker="x", ms=7, mew=2, color=OUTLIER, label="outlier (excluded)")
+        )
+        handles.append(
+            Line2D([], [], ls="none", marker="^", ms=6, color=OUTLIER, label="outlier beyond the axis")
+        )
+    fig.legend(handles=handles, loc="outside lower center", ncol=len(handles), fontsize=8, frameon=False)
+
+
 def law_curves(result, speeds) -> dict:
     """e(v) of the fitted law (and, after `law="auto"`, of the other law) at `speeds` (m/s)."""
     from ._restitution import law_restitution
@@ -45,87 +139,218 @@ def law_curves(result, speeds) -> dict:
     return curves
 
 
-def plot_restitution_of_fit(result, *, ax=None):
-    """Per-bounce restitution against impact speed: the data (drag-corrected flights of
-    the kept onsets) and each fitted law's curve. **Returns:** the figure."""
-    from ._plot_restitution import plot_restitution
+def _points_by_file(result):
+    """`bounce_points` with each segment's file index: [(file, label, BounceRestitution)]."""
     from ._summary import bounce_points
 
-    points = dict(bounce_points(result))
-    speeds = (
-        np.concatenate([np.asarray(p.impact_speed) for p in points.values()]) if points else np.array([1.0])
-    )
+    datasets = result.datasets_data or [result.data]
+    labels = [_label(d, f) for f, d in enumerate(datasets)]
+    out, f = [], 0
+    for label, points in bounce_points(result):
+        # bounce_points walks the files in order; a segment's label is its file's, maybe + " (k)".
+        while f < len(labels) and not (label == labels[f] or label.startswith(labels[f] + " (")):
+            f += 1
+        out.append((min(f, len(labels) - 1), label, points))
+    return out
+
+
+def _speed_grid(points) -> np.ndarray:
+    speeds = np.concatenate([np.asarray(p.impact_speed) for *_, p in points]) if points else np.array([1.0])
     speeds = speeds[np.isfinite(speeds)]
     lo, hi = (float(np.min(speeds)), float(np.max(speeds))) if speeds.size else (0.3, 3.0)
-    grid = np.linspace(max(0.8 * lo, 0.05), 1.1 * hi, 24)
-    return plot_restitution(points or None, law_curves(result, grid), ax=ax, title="restitution per bounce")
+    return np.linspace(max(0.8 * lo, 0.05), 1.1 * hi, 24)
+
+
+def plot_restitution_of_fit(result, *, ax=None):
+    """Per-bounce restitution against impact speed: the data (drag-corrected flights of
+    the kept onsets, each file in its colour) and each fitted law's curve (black).
+
+    On a new figure (`ax` None) the files' key and the legend sit outside the axes as in
+    `plot_fit`; on a given `ax`, one legend (the laws, and the files up to `MANY_FILES`)
+    goes just right of it. **Returns:** the figure.
+    """
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+
+    key = _Key(result)
+    points = _points_by_file(result)
+    curves = law_curves(result, _speed_grid(points))
+    if ax is None:
+        fig = Figure(
+            figsize=(7.5, max(4.6, 1.8 + 0.26 * key.n * (key.n <= MANY_FILES))), layout="constrained"
+        )
+        ax = fig.add_subplot()
+        laws = _restitution_panel(ax, result, key, points, curves)
+        key.draw(fig, [ax])
+        _style_legend(fig, laws=laws, held_out=False, outliers=False, row_label="bounce (kept onsets)")
+        return fig
+    laws = _restitution_panel(ax, result, key, points, curves)
+    handles = [Line2D([], [], color=c, ls=ls, lw=1.5, label=name) for name, c, ls in laws]
+    if 1 < key.n <= MANY_FILES:
+        handles += [
+            Line2D([], [], ls="none", marker="o", ms=5, color=c, label=name)
+            for c, name in zip(key.colours, key.names, strict=True)
+        ]
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, borderaxespad=0.0)
+    return ax.figure
+
+
+def _restitution_panel(ax, result, key: _Key, points, curves) -> list:
+    """e against impact speed, each file's bounces in its colour, the laws as black lines.
+    **Returns:** the curves' (name, colour, linestyle) for the legend."""
+    for f, _, p in points:
+        ax.plot(np.asarray(p.impact_speed, float), np.asarray(p.restitution, float), "o", ms=4,
+                color=key.colours[f], alpha=0.85 if key.n > 1 else 1.0)  # fmt: skip
+    laws = []
+    for j, (name, (speeds, e)) in enumerate(curves.items()):
+        ls = "-" if j == 0 else "--"
+        order = np.argsort(speeds)
+        ax.plot(np.asarray(speeds)[order], np.asarray(e)[order], color="k", ls=ls, lw=1.5)
+        laws.append((str(name), "k", ls))
+    ax.set_xlabel("impact speed v [m/s]")
+    ax.set_ylabel("restitution e = v_out / v_in [-]")
+    ax.set_title(
+        f"restitution per bounce ({sum(len(p.restitution) for *_, p in points)} bounces)", fontsize=9
+    )
+    ax.grid(True, alpha=0.3)
+    return laws
 
 
 def plot_fit(result, *, title: str | None = None):
     """A figure of the data against the fitted model and the residuals.
 
     - impact onsets: restitution against impact speed (left: each bounce from the data's
-      drag-corrected flight times, each fitted law as a curve) and the onset residuals
-      of every file (right), excluded rows marked with a red cross;
-    - trace: x(t) data and the fitted run of the first file (top), the residuals of
-      every file (bottom);
-    - apex: observed rebound heights against the fitted ones (top), residuals (bottom).
+      drag-corrected flight times, each fitted law as a black curve) and the onset
+      residuals of every file (right, ms, against the onset time in s);
+    - trace: x(t) data and the fitted run of the first file (top, m), the residuals of
+      every file (bottom, mm);
+    - apex: observed rebound heights against the fitted ones (top, m), residuals (bottom, mm).
+
+    Fitted rows are dots, held-out rows open circles, outliers red crosses (a red
+    triangle at the axis' edge when beyond the kept rows' range, which sets the axis).
+    Each file has its own colour; the key sits right of the axes (a legend of file
+    names up to `MANY_FILES` files, a colour bar of the release height x0 in mm beyond)
+    and the markers' legend below them, never over the data. The figure grows a little
+    with the number of files named in the legend.
 
     **Returns:** a `matplotlib.figure.Figure` (save it with `jaxunilat.save_figure`).
     """
     from matplotlib.figure import Figure
 
     data = result.data
+    key = _Key(result)
+    files = _files(result)
+    held = any(np.any(_held_out(res, used, out)) for _, res, used, out in files)
+    excluded = any(out.size for *_, out in files)
+    named = key.n if 1 < key.n <= MANY_FILES else 0
+    height = max(5.2, 2.0 + 0.26 * named)
     if data.observe == "impacts":
-        fig = Figure(figsize=(12.0, 5.0), layout="constrained")
+        fig = Figure(figsize=(13.0, height), layout="constrained")
         left, right = fig.subplots(1, 2, width_ratios=(1, 1.2))
-        plot_restitution_of_fit(result, ax=left)
-        _residual_panel(right, result, scale=1e3, unit="ms", xlabel="onset time t [s]")
+        points = _points_by_file(result)
+        laws = _restitution_panel(left, result, key, points, law_curves(result, _speed_grid(points)))
+        _residual_panel(
+            right, result, key, scale=1e3, unit="ms", xlabel="onset time t [s] (each file's clock)"
+        )
+        key.draw(fig, [left, right])
+        _style_legend(
+            fig, laws=laws, held_out=held, outliers=excluded, row_label="bounce (left), fitted onset (right)"
+        )
         fig.suptitle(title or _title(result), fontsize=10)
         return fig
-    fig = Figure(figsize=(9.0, 6.0), layout="constrained")
-    top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=(3, 1))
-    d, res, _, outliers = _files(result)[0]
+    fig = Figure(figsize=(11.0, max(6.5, height + 1.3)), layout="constrained")
+    top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=(3, 2))
+    d, res, used, outliers = files[0]
+    held_rows = _held_out(res, used, outliers)
+    c = key.colours[0]
+    which = f" ({_label(d, 0)}, file 1 of {key.n})" if key.n > 1 else ""
     if data.observe == "trace":
-        t = np.asarray(d.t)
-        top.plot(t, d.x, ".", ms=2, color="0.5", label="data")
-        top.plot(t, np.asarray(d.x) + res, lw=1.0, color="C0", label="fit")
+        x = np.asarray(d.t)
+        y = np.asarray(d.x)
+        top.plot(x, y, ".", ms=2, color="0.55")
+        top.plot(x, y + res, lw=1.0, color="k")
         top.set_ylabel("x [m]")
-        _residual_panel(bottom, result, scale=1e3, unit="mm", xlabel="t [s]")
+        top.set_title("position: data (grey dots) and fit (black line)" + which, fontsize=9)
+        _residual_panel(bottom, result, key, scale=1e3, unit="mm", xlabel="t [s]")
+        laws = [("fit", "k", "-")]
     else:
-        k = np.arange(len(res))
-        top.plot(k, d.h, "o", color="0.5", label="data")
-        top.plot(k, np.asarray(d.h) + res, "x", color="C0", label="fit")
+        x = np.arange(len(res))
+        y = np.asarray(d.h)
+        top.plot(x, y, "o", color="0.55", ms=5)
+        top.plot(x, y + res, "_", color="k", ms=14, mew=2)
         top.set_ylabel("apex height h [m]")
-        _residual_panel(bottom, result, scale=1e3, unit="mm", xlabel="rebound")
+        top.set_title("rebound apex heights: data (grey) and fit (black bars)" + which, fontsize=9)
+        _residual_panel(bottom, result, key, scale=1e3, unit="mm", xlabel="rebound number")
+        laws = [("fit", "k", "-")]
+    if held_rows.any():
+        small = data.observe == "trace"
+        top.plot(x[held_rows], y[held_rows], "o", ms=3 if small else 7, mfc="none", mew=0.8 if small else 1.2,
+                 color=c)  # fmt: skip
     if outliers.size:
-        x = np.asarray(d.t) if data.observe == "trace" else np.arange(len(res))
-        y = d.x if data.observe == "trace" else d.h
-        top.plot(x[outliers], np.asarray(y)[outliers], "x", color="C3", ms=8, label="excluded")
-    top.legend(loc="upper right")
-    top.set_title(title or _title(result), fontsize=10)
+        top.plot(x[outliers], y[outliers], "x", color=OUTLIER, ms=8, mew=2)
     top.grid(True, alpha=0.3)
+    key.draw(fig, [top, bottom])
+    _style_legend(fig, laws=laws, held_out=held, outliers=excluded, trace=data.observe == "trace")
+    fig.suptitle(title or _title(result), fontsize=10)
     return fig
 
 
-def _residual_panel(ax, result, *, scale: float, unit: str, xlabel: str) -> None:
-    """Every file's residuals against time (apex: against the rebound), outliers as red crosses."""
+def _held_out(res, used, outliers) -> np.ndarray:
+    """Rows neither fitted nor outliers: the held-out rows."""
+    held = ~np.asarray(used, bool)
+    held[outliers] = False
+    return held & np.isfinite(res)
+
+
+def _residual_panel(ax, result, key: _Key, *, scale: float, unit: str, xlabel: str) -> None:
+    """Every file's residuals (prediction − data, × `scale` into `unit`) against time
+    (apex: against the rebound): fitted rows dots, held-out rows open circles, outliers
+    red crosses, or red triangles at the edge when beyond the range of the other rows."""
+    kept_values, outs = [], []
     for f, (d, res, used, outliers) in enumerate(_files(result)):
         x = np.asarray(d.t) if d.observe in ("trace", "impacts") else np.arange(len(res))
-        style = dict(ms=2) if d.observe == "trace" else dict(ms=4)
-        ax.plot(x[used], res[used] * scale, "o" if d.observe != "trace" else ".", color=f"C{f % 10}",
-                label=_label(d, f), **style)  # fmt: skip
-        if outliers.size:
-            ax.plot(x[outliers], res[outliers] * scale, "x", color="C3", ms=9, mew=2)
+        r = np.asarray(res) * scale
+        c = key.colours[f]
+        trace = d.observe == "trace"
+        ax.plot(x[used], r[used], "." if trace else "o", ms=2 if trace else 3.5, color=c)
+        held = _held_out(res, used, outliers)
+        if held.any():
+            ax.plot(x[held], r[held], "o", ms=3 if trace else 6, mfc="none", mew=0.8 if trace else 1.2,
+                    color=c)  # fmt: skip
+        kept_values.append(r[used | held])
+        outs += [(float(x[i]), float(r[i])) for i in outliers]
+    kept = np.concatenate(kept_values) if kept_values else np.zeros(0)
+    kept = kept[np.isfinite(kept)]
     ax.axhline(0.0, color="0.6", lw=0.8)
+    beyond = 0
+    if kept.size:
+        lo, hi = float(np.min(kept)), float(np.max(kept))
+        pad = 0.15 * max(hi - lo, 1e-12)
+        lo, hi = min(lo - pad, -pad), max(hi + pad, pad)
+        edge_lo, edge_hi = lo + 0.4 * pad, hi - 0.4 * pad
+        for x, r in outs:
+            if r > hi:
+                ax.plot(x, edge_hi, "^", color=OUTLIER, ms=7, clip_on=False)
+                beyond += 1
+            elif r < lo:
+                ax.plot(x, edge_lo, "v", color=OUTLIER, ms=7, clip_on=False)
+                beyond += 1
+            else:
+                ax.plot(x, r, "x", color=OUTLIER, ms=8, mew=2)
+        ax.set_ylim(lo, hi)
+    else:
+        for x, r in outs:
+            ax.plot(x, r, "x", color=OUTLIER, ms=8, mew=2)
     ax.set_ylabel(f"fit - data [{unit}]")
     ax.set_xlabel(xlabel)
     ax.grid(True, alpha=0.3)
-    if len(result.datasets_data or [1]) > 1:
-        ax.legend(fontsize=7, ncol=2)
-    excluded = sum(len(e["outliers"]) for e in result.datasets)
-    if excluded:
-        ax.set_title(f"residuals ({excluded} excluded rows marked x)", fontsize=9)
+    text = f"residuals, {key.n} files" if key.n > 1 else "residuals"
+    if outs:
+        text += f"; {len(outs)} outlier{'s' * (len(outs) > 1)} excluded"
+        if beyond:
+            worst = max(abs(r) for _, r in outs)
+            text += f" ({beyond} off the axis, up to {worst:.3g} {unit})"
+    ax.set_title(text, fontsize=9)
 
 
 def _title(result) -> str:
@@ -135,7 +360,7 @@ def _title(result) -> str:
     e = result.derived["restitution"]
     u = units(result.law)
     files = result.datasets_data or [result.data]
-    name = _label(files[0], 0) + (f" and {len(files) - 1} more" if len(files) > 1 else "")
+    name = _label(files[0], 0) if len(files) == 1 else f"{len(files)} files"
     return (
         f"{name}: {result.law}, kappa = {kappa['value']:.4g} {u['kappa']}, k_r = {k_r['value']:.4g} {u['k_r']}, "
         f"e = {e['value']:.4f}"

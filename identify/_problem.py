@@ -245,5 +245,8 @@ def make_problem(
 
 
 def default_max_steps(n_events: int, horizon: float) -> int:
-    """The step budget of one run: room for every bounce and the flight between them."""
-    return int(min(max(2048, 200 * (n_events + 4) + 600 * horizon), 16384))
+    """The step budget of one run: room for every bounce and the flight between them,
+    rounded up to a power of two (a static field: files whose needs differ a little share
+    one compiled program instead of compiling one each)."""
+    need = min(max(2048, 200 * (n_events + 4) + 600 * horizon), 16384)
+    return int(2 ** math.ceil(math.log2(need)))

@@ -12,7 +12,22 @@ import numpy as np
 
 import jaxunilat as ju
 
-from ._problem import PARAMETERS, from_z, units
+from ._problem import LOG_PARAMETERS, PARAMETERS, from_z, units
+
+#: A 95% interval whose ends lie more than this many decades apart bounds nothing useful.
+SPAN_DECADES = 3.0
+#: An interval end beyond 1e±30 (SI units) is a number, not a bound.
+ABSURD = 1e30
+#: Contact times outside this window (s) are no physical bound on a ball's contact.
+CONTACT_TIME_WINDOW = (1e-6, 1.0)
+#: How `bound` shows each quantity: (symbol, scale from SI, unit); None: the law's unit.
+_SHOWN = {
+    "kappa": ("kappa", 1.0, None),
+    "k_r": ("k_r", 1.0, None),
+    "drag": ("drag", 1.0, "s/m"),
+    "restitution": ("e", 1.0, ""),
+    "contact_time": ("t_c", 1e3, "ms"),
+}
 
 
 @dataclasses.dataclass
@@ -94,6 +109,7 @@ class FitResult:
     sigma_known: bool = False
     datasets_data: list = dataclasses.field(default_factory=list)
     notes: list = dataclasses.field(default_factory=list)
+    contradictions: list = dataclasses.field(default_factory=list)
 
     def criteria(self, used: np.ndarray | None = None) -> dict:
         """χ², AIC and BIC of the fit over the `used` rows (default: its fitted rows).
@@ -150,8 +166,11 @@ class FitResult:
         g = self.goodness
         hints = ["check the file's scene, x0, v0, drag and noise"]
         if self.data.observe in ("impacts", "trace") and "offset" not in self.free:
-            what = "acoustic impact times" if self.data.observe == "impacts" else "video frames"
-            hints.insert(0, f"{what} rarely know the release time: add --fit offset")
+            if self.data.observe == "impacts":
+                hint = "acoustic impact times rarely know the release time: fit the offset (leave out --freeze offset)"
+            else:
+                hint = "video frames rarely know the release time: add --fit offset"
+            hints.insert(0, hint)
         elif "x0" not in self.free or "v0" not in self.free:
             hints.append("or fit the start with --fit x0,v0")
         return (
@@ -221,6 +240,8 @@ class FitResult:
             "datasets": [_clean_json(d) for d in self.datasets],
             "holdout": None if self.holdout is None else _clean_json(self.holdout),
             "notes": list(self.notes),
+            "files": _clean_json(self.file_table()),
+            "bounds": _clean_json(self.bounds()),
             "profile_kappa": None
             if self.profile is None
             else {
@@ -228,8 +249,100 @@ class FitResult:
                 "delta_chi2": [_finite_or_none(v) for v in self.profile["delta_chi2"]],
                 "ci95": [_finite_or_none(v) for v in self.profile["ci95"]],
                 "failed": [float(v) for v in self.profile.get("failed", [])],
+                "bound": _clean_json(
+                    bound(
+                        "kappa", {"value": self.kappa, "ci95": self.profile["ci95"]}, units(self.law)["kappa"]
+                    )
+                ),
             },
         }
+
+    def bounds(self) -> dict:
+        """What the data bound of κ, k_r, e and t_c (`bound`): `{name: {"kind", "lower",
+        "upper", "unit", "text"}}`, SI units; "none" where the 95% interval is unbounded or
+        absurd (not finite, beyond 1e±30, or spanning more than `SPAN_DECADES` decades)."""
+        u = units(self.law)
+        out = {n: bound(n, self.parameters[n], u[n]) for n in ("kappa", "k_r")}
+        out.update({n: bound(n, self.derived[n]) for n in ("restitution", "contact_time")})
+        return out
+
+    def file_table(self) -> list[dict]:
+        """One dict per file, in file order: the per-file (nuisance) values of the fit.
+
+        Keys: `name` (the file's base name), `data` (its path or None), `observe`, `rows`,
+        `used` (fitted rows), `held_out`, `outliers` and `missed` (counts); `x0` (m),
+        `v0` (m/s) and `offset` (s), each `{"value", "stderr", "unit", "status"}` with
+        status "fitted" (stderr from the joint covariance) or "fixed" (stderr None);
+        `e_alone`: the file's own restitution `{"value", "stderr", "ci95"}` (κ, k_r fitted
+        to this file alone; for a one-file fit, the fit's e); `rms`: the residual rms of
+        the used rows `{"value", "unit"}` in SI units (s for onsets, m otherwise) and
+        `rms_shown` the same in the report's unit (ms or mm).
+        """
+        datasets = self.datasets_data or [self.data]
+        entries = self.datasets or [None] * len(datasets)
+        per_file = self._per_file_values(len(datasets))
+        used = self.used if self.used is not None else np.ones(len(self.residuals), bool)
+        out, start = [], 0
+        for f, (d, e) in enumerate(zip(datasets, entries, strict=True)):
+            n = int(d.num_rows)
+            if e is None:  # a result built by hand: derive the counts from the mask
+                res = np.asarray(self.residuals[start : start + n])
+                mask = used[start : start + n]
+                e = {"data": d.path, "rows": n, "used": int(mask.sum()), "held_out": 0, "outliers": [],
+                     "missed": [], "parameters": {},
+                     "rms": float(np.sqrt(np.mean(res[mask] ** 2))) if mask.any() else None}  # fmt: skip
+            start += n
+            observe = e.get("observe", d.observe)
+            scale, shown = residual_unit(observe)
+            si = "s" if observe == "impacts" else "m"
+            values = {}
+            for name, unit in (("x0", "m"), ("v0", "m/s"), ("offset", "s")):
+                own = e["parameters"].get(name)
+                if own is not None:
+                    values[name] = {"value": own["value"], "stderr": own["stderr"], "unit": unit,
+                                    "status": "fitted"}  # fmt: skip
+                else:
+                    values[name] = {
+                        "value": per_file[f][name],
+                        "stderr": None,
+                        "unit": unit,
+                        "status": "fixed",
+                    }
+            alone = e.get("restitution_alone")
+            if alone is None and len(datasets) == 1:
+                alone = self.derived["restitution"]
+            rms = e.get("rms")
+            out.append(
+                {
+                    "name": _file_name(e["data"], f),
+                    "data": e["data"],
+                    "observe": observe,
+                    "rows": int(e["rows"]),
+                    "used": int(e["used"]),
+                    "held_out": int(e.get("held_out", 0)),
+                    "outliers": len(e["outliers"]),
+                    "missed": len(e.get("missed", [])),
+                    **values,
+                    "e_alone": None if alone is None else dict(alone),
+                    "rms": {"value": rms, "unit": si},
+                    "rms_shown": {"value": None if rms is None else rms * scale, "unit": shown},
+                }
+            )
+        return out
+
+    def _per_file_values(self, n_files: int) -> list[dict]:
+        """Each file's x0, v0 and offset as used by the fit (fitted or held), SI units."""
+        if self.joint_z is not None:
+            from ._joint import Layout
+
+            z = np.asarray(self.joint_z, dtype=float)
+            layout = Layout(n_files=n_files)
+            if z.size == layout.size:
+                return [from_z(z[layout.index[f]]) for f in range(n_files)]
+        if n_files == 1:
+            return [from_z(self.z)]
+        datasets = self.datasets_data or [self.data]
+        return [{"x0": float(d.x0), "v0": float(d.v0), "offset": 0.0} for d in datasets]
 
     def report(self) -> str:
         """A plain-text report in the style of lmfit's `fit_report`."""
@@ -303,21 +416,57 @@ class FitResult:
 
     def _report_variables(self) -> list[str]:
         d, unit = self.data, units(self.law)
+        several = len(self.datasets_data or [d]) > 1
         lines = [
-            "[[Variables]]" + ("" if self.converged else " (NOT CONVERGED: the values are not estimates)")
+            "[[Variables]]"
+            + ("" if self.converged else " (NOT CONVERGED: the values are not estimates)")
+            + (" (shared by every file)" if several else "")
         ]
+        per_file = []
         for name in PARAMETERS:
             entry = self.parameters[name]
+            if several and name in ("x0", "v0", "offset"):
+                per_file.append(name)
+                continue
             if name not in self.free:
                 if name in ("kappa", "k_r") or (name == "drag" and d.drag > 0) or name in ("x0", "v0"):
                     lines.append(f"    {name:<7}= {entry['value']:<12.6g} (fixed)  {unit[name]}")
                 continue
-            lines.append("    " + _format_entry(name, entry, unit[name], self.converged))
+            lines.append("    " + _format_entry(name, entry, unit[name], self.converged, self._bound(name)))
+        if several:
+            lines.append(self._per_file_line(per_file))
         where = "" if self.law == "kelvin-voigt" else " at the data's typical impact speed"
         lines.append(f"[[Derived]] ({self.law}{where})")
-        lines.append("    " + _format_entry("e", self.derived["restitution"], "", self.converged))
-        lines.append("    " + _format_entry("t_c", self.derived["contact_time"], "s", self.converged))
+        for name, label, u in (("restitution", "e", ""), ("contact_time", "t_c", "s")):
+            entry = self.derived[name]
+            lines.append("    " + _format_entry(label, entry, u, self.converged, self._bound(name)))
         return lines
+
+    def _bound(self, name: str) -> dict | None:
+        """`bound` of κ, k_r, drag, e and t_c (None for the release state and offset)."""
+        if name in ("kappa", "k_r", "drag"):
+            return bound(name, self.parameters[name], units(self.law)[name])
+        if name in ("restitution", "contact_time"):
+            return bound(name, self.derived[name])
+        return None
+
+    def _per_file_line(self, names: list[str]) -> str:
+        """Where a several-file fit's x0, v0 and offset are: the [[Files]] table, or one
+        value held for every file."""
+        table = self.file_table()
+        fitted = [n for n in names if any(f[n]["status"] == "fitted" for f in table)]
+        held = [n for n in names if n not in fitted]
+        parts = []
+        if fitted:
+            parts.append(f"{', '.join(fitted)} fitted per file: values in [[Files]] below")
+        for n in held:
+            values = {f[n]["value"] for f in table}
+            unit = table[0][n]["unit"]
+            if len(values) == 1:
+                parts.append(f"{n} = {values.pop():g} {unit} (fixed, every file)")
+            else:
+                parts.append(f"{n} fixed per file (in [[Files]])")
+        return "    per file: " + "; ".join(parts)
 
     def _report_identifiability(self) -> list[str]:
         lines = [
@@ -332,9 +481,9 @@ class FitResult:
             ("contact_time", "t_c"),
         ):
             entry = self.parameters.get(name) or self.derived.get(name)
-            lines.append(
-                f"    {label:<7}: {'yes' if self.identifiable[name] else 'NO':<4}" + _halfwidth(entry)
-            )
+            b = self._bound(name)
+            says = _halfwidth(entry) if b["kind"] == "interval" else f"  ({b['text']})"
+            lines.append(f"    {label:<7}: {'yes' if self.identifiable[name] else 'NO':<4}" + says)
         lines.append("[[Correlations]] (of the fitted entries; logs for kappa, k_r, drag)")
         names, corr = self.free, np.asarray(self.correlation)
         for i in range(len(names)):
@@ -342,10 +491,14 @@ class FitResult:
                 lines.append(f"    C({names[i]}, {names[j]}) = {corr[i, j]:+.6f}")
         if self.profile is not None:
             lo, hi = self.profile["ci95"]
+            b = bound("kappa", {"value": self.kappa, "ci95": [lo, hi]}, units(self.law)["kappa"])
             lines.append("[[Profile likelihood]]")
-            lines.append(
-                f"    kappa 95% CI (delta chi2 <= 3.84): [{lo:.6g}, {hi:.6g}] {units(self.law)['kappa']}"
-            )
+            if b["kind"] == "interval":
+                lines.append(
+                    f"    kappa 95% CI (delta chi2 <= 3.84): [{lo:.6g}, {hi:.6g}] {units(self.law)['kappa']}"
+                )
+            else:
+                lines.append(f"    kappa (delta chi2 <= 3.84): {b['text']}")
             if self.profile.get("failed"):
                 lines.append(
                     f"    grid points whose re-fit failed (not excluded): {len(self.profile['failed'])}"
@@ -353,32 +506,50 @@ class FitResult:
         return lines
 
     def _report_rows(self) -> list[str]:
-        """Per file: rows used, outliers, missed bounces, residual scatter, own e."""
+        """Per file: rows used, held out, outliers, residual rms, its x0/v0/offset and own e."""
         if not self.datasets:
             return []
-        unit = "ms" if self.data.observe == "impacts" else "mm"
-        lines = ["[[Files]]" if len(self.datasets) > 1 else "[[Rows]]"]
-        header = f"    {'file':<28} {'rows':>5} {'used':>5} {'outliers':>8} {'rms (' + unit + ')':>9}"
-        lines.append(header + ("   e alone (t_c prior)" if len(self.datasets) > 1 else ""))
-        for e in self.datasets:
-            name = os.path.basename(e["data"]) if e["data"] else "(in memory)"
-            rms = f"{e['rms'] * 1e3:9.3g}" if e["rms"] is not None else f"{'-':>9}"
-            row = f"    {name[:28]:<28} {e['rows']:>5} {e['used']:>5} {len(e['outliers']):>8} {rms}"
-            alone = e.get("restitution_alone")
-            if alone is not None:
-                row += f"   {alone['value']:.4f} +/- {alone['stderr']:.2g}"
-            lines.append(row)
-        for e in self.datasets:
-            name = os.path.basename(e["data"]) if e["data"] else "(in memory)"
+        table = self.file_table()
+        several = len(table) > 1
+        scale, unit = residual_unit(self.data.observe)
+        lines = ["[[Files]] (each file's own values; kappa, k_r, drag shared)" if several else "[[Rows]]"]
+        # A column for every per-file value that is fitted or differs between files.
+        columns = []
+        if several:
+            for name, s, u in (("x0", 1e3, "mm"), ("v0", 1.0, "m/s"), ("offset", 1e3, "ms")):
+                if (
+                    any(f[name]["status"] == "fitted" for f in table)
+                    or len({f[name]["value"] for f in table}) > 1
+                ):
+                    columns.append((name, s, u))
+        width = max([len(f["name"]) for f in table] + [4]) if several else 28
+        width = min(width, 32)
+        header = f"    {'file':<{width}} {'rows':>5} {'used':>5} {'held':>5} {'outliers':>8} {'rms (' + unit + ')':>9}"
+        header += "".join(f"  {name + ' (' + u + ')':<20}" for name, _, u in columns)
+        lines.append(header + ("  e alone (t_c prior)" if several else ""))
+        for f in table:
+            rms = f["rms_shown"]["value"]
+            rms = f"{rms:9.3g}" if rms is not None else f"{'-':>9}"
+            name = f["name"] if len(f["name"]) <= width else f["name"][: width - 3] + "..."
+            row = f"    {name:<{width}} {f['rows']:>5} {f['used']:>5} {f['held_out']:>5} {f['outliers']:>8} {rms}"
+            for col, s, _ in columns:
+                row += f"  {_pm(f[col]['value'], f[col]['stderr'], s):<20}"
+            alone = f["e_alone"]
+            if several and alone is not None:
+                row += f"  {_pm(alone['value'], alone['stderr'], 1.0)}"
+            lines.append(row.rstrip())
+        for f, e in zip(table, self.datasets, strict=True):
+            s, u = residual_unit(f["observe"])
             for o in e["outliers"]:
                 at = f" at t = {o['t']:.6g} s" if o.get("t") is not None else ""
                 lines.append(
-                    f"    outlier: {name} row {o['row']}{at}, residual {o['residual']:.3g} ({o['reason']})"
+                    f"    outlier: {f['name']} row {o['row']}{at}, residual {o['residual'] * s:+.3g} {u} "
+                    f"({o['reason']})"
                 )
             for m in e["missed"]:
                 lines.append(
-                    f"    missed bounce: {name} between rows {m['after_row']} and {m['before_row']} "
-                    f"(interval {m['interval']:.4g} s after {m['previous']:.4g} s)"
+                    f"    missed bounce: {f['name']} between rows {m['after_row']} and {m['before_row']} "
+                    f"(interval {m['interval'] * 1e3:.4g} ms after one of {m['previous'] * 1e3:.4g} ms)"
                 )
         return lines
 
@@ -438,13 +609,17 @@ def _costs(starts) -> str:
     return ", ".join(f"{2 * s['cost']:.4g}" + ("" if s["converged"] else "*") for s in starts)
 
 
-def _format_entry(name: str, entry: dict, unit: str, converged: bool = True) -> str:
+def _format_entry(name: str, entry: dict, unit: str, converged: bool = True, b: dict | None = None) -> str:
+    """One [[Variables]] line; `b` (from `bound`) replaces an unbounded or absurd interval."""
     value, stderr = entry["value"], entry["stderr"]
     if not converged:
         return f"{name:<7}= {value:<12.6g} (no interval: the fit did not converge) {unit}"
     lo, hi = entry["ci95"]
     rel = f"({_percent(stderr / abs(value))})" if math.isfinite(stderr) and value else "(inf)"
-    return f"{name:<7}= {value:<12.6g} +/- {stderr:<10.4g} {rel:<9} 95% CI [{lo:.6g}, {hi:.6g}] {unit}"
+    head = f"{name:<7}= {value:<12.6g} +/- {stderr:<10.4g} {rel:<9}"
+    if b is not None and b["kind"] != "interval":
+        return f"{head} {unit}; {b['text']}"
+    return f"{head} 95% CI [{lo:.6g}, {hi:.6g}] {unit}"
 
 
 def _halfwidth(entry) -> str:
@@ -457,3 +632,110 @@ def _halfwidth(entry) -> str:
 def _percent(fraction: float) -> str:
     """A relative width as a percentage, or '> 1000%' for an unbounded one."""
     return f"{fraction:.2%}" if fraction <= 10.0 else "> 1000%"
+
+
+def bound(name: str, entry: dict, unit: str | None = None) -> dict:
+    """What the data bound of one quantity, from its 95% interval `entry["ci95"]` (SI units).
+
+    An end says nothing when it is not finite, is at or beyond 1e±30, is ≤ 0 for a
+    positive quantity (κ, k_r, drag, t_c), lies outside 1 µs–1 s for the contact time
+    t_c, or (e) is the clip at 0 or 1. When both ends survive but lie more than
+    `SPAN_DECADES` decades apart, or one survives more than that far from the estimate,
+    neither is a useful bound either.
+
+    **Arguments:** `name` (a key of `parameters` or `derived`), the entry, and the unit
+    to show κ and k_r in (the law's; default N/m, N·s/m).
+
+    **Returns:** `{"kind", "lower", "upper", "unit", "text"}`: kind is "interval" (both
+    ends, as `lower`, `upper`), "upper" (only an upper limit), "lower" (only a lower
+    limit) or "none" (not bounded by the data); `lower`/`upper` are the surviving ends in
+    SI units (None where dropped); `unit` is the SI unit; `text` the readable statement,
+    e.g. "95% CI [0.96, 0.97]", "t_c < 3.2 ms (no lower bound from the data)" or
+    "not bounded by the data (95% CI spans 4.2 decades)".
+    """
+    symbol, scale, shown = _SHOWN.get(name, (name, 1.0, ""))
+    si = {"kappa": "N/m", "k_r": "N*s/m", "drag": "s/m", "restitution": "", "contact_time": "s"}.get(name, "")
+    shown = (unit or si) if shown is None else shown
+    lo, hi = (float(v) for v in entry["ci95"])
+    value = float(entry["value"])
+    positive = name in LOG_PARAMETERS or name == "contact_time"
+
+    def usable(end: float) -> bool:
+        if not math.isfinite(end) or abs(end) >= ABSURD:
+            return False
+        if name == "restitution":
+            return 0.0 < end < 1.0
+        if positive:
+            if end <= 1.0 / ABSURD:
+                return False
+            if name == "contact_time" and not CONTACT_TIME_WINDOW[0] <= end <= CONTACT_TIME_WINDOW[1]:
+                return False
+        return True
+
+    keep_lo, keep_hi = usable(lo), usable(hi)
+    span = None
+    if positive and keep_lo and keep_hi:
+        span = math.log10(hi / lo)
+        if span > SPAN_DECADES:
+            keep_lo = keep_hi = False
+    elif positive and value > 0 and math.isfinite(value):
+        far = [lo, hi][keep_hi] if keep_lo != keep_hi else None
+        if far is not None and abs(math.log10(far / value)) > SPAN_DECADES:
+            keep_lo = keep_hi = False
+    if name == "restitution" and (keep_lo or keep_hi):
+        keep_lo = keep_hi = math.isfinite(lo) and math.isfinite(hi)
+    if not positive and name != "restitution":
+        keep_lo = keep_hi = keep_lo and keep_hi
+
+    def fmt(v: float) -> str:
+        return f"{v * scale:.3g}" + (f" {shown}" if shown else "")
+
+    if keep_lo and keep_hi:
+        kind, text = (
+            "interval",
+            f"95% CI [{lo * scale:.6g}, {hi * scale:.6g}]" + (f" {shown}" if shown else ""),
+        )
+    elif keep_hi:
+        kind, text = "upper", f"{symbol} < {fmt(hi)} (95%; no lower bound from the data)"
+    elif keep_lo:
+        kind, text = "lower", f"{symbol} > {fmt(lo)} (95%; no upper bound from the data)"
+    else:
+        if span is not None:
+            why = f"95% CI spans {span:.1f} decades"
+        elif name == "restitution" and math.isfinite(lo) and math.isfinite(hi):
+            why = "95% CI covers 0 to 1"
+        else:
+            why = "95% CI unbounded"
+        kind, text = "none", f"not bounded by the data ({why})"
+    return {
+        "kind": kind,
+        "lower": lo if keep_lo else None,
+        "upper": hi if keep_hi else None,
+        "unit": si,
+        "text": text,
+    }
+
+
+def residual_unit(observe: str) -> tuple[float, str]:
+    """(scale from SI, unit) in which a residual of this data kind is printed: ms for
+    impact onset times, mm for positions (trace) and apex heights."""
+    return (1e3, "ms") if observe == "impacts" else (1e3, "mm")
+
+
+def _pm(value: float, stderr: float | None, scale: float) -> str:
+    """value +/- stderr, both × scale, to two significant digits of the stderr."""
+    v = value * scale
+    if stderr is None:
+        return f"{v:.6g} (fixed)"
+    if not math.isfinite(stderr):
+        return f"{v:.6g} +/- inf"
+    s = stderr * scale
+    if s <= 0:
+        return f"{v:.6g}"
+    digits = min(max(1 - math.floor(math.log10(s)), 0), 9)
+    return f"{v:.{digits}f} +/- {s:.{digits}f}"
+
+
+def _file_name(path: str | None, f: int) -> str:
+    """A file's base name, or "data <f + 1>" for data held in memory."""
+    return os.path.basename(path) if path else f"data {f + 1}"

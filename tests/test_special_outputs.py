@@ -7,10 +7,12 @@ private device nodes (`mknod`, skipped where the sandbox forbids it) and FIFOs m
 the test's own folder: never the system's own `/dev` entries.
 """
 
+import errno
 import os
 import socket
 import stat
 import threading
+import time
 
 import pytest
 from test_output_paths import COMMANDS, DATA_DIR, FLAGS, _command_line
@@ -47,8 +49,15 @@ class _Reader:
             self.data = f.read()
 
     def join(self) -> bytes:
-        if self._thread.is_alive():  # nobody wrote: open the write end so the reader ends
-            os.close(os.open(self.path, os.O_WRONLY | os.O_NONBLOCK))
+        deadline = time.monotonic() + 10
+        while self._thread.is_alive() and time.monotonic() < deadline:
+            try:  # nobody wrote: open the write end (once the reader is there) so it ends
+                os.close(os.open(self.path, os.O_WRONLY | os.O_NONBLOCK))
+                break
+            except OSError as err:
+                if err.errno != errno.ENXIO:  # ENXIO: the reader has not opened it yet
+                    raise
+                time.sleep(0.01)
         self._thread.join(timeout=30)
         return self.data
 

@@ -24,8 +24,9 @@ def add_identify(commands) -> None:
         "files (format: data/README.md; `jaxunilat import` converts recordings) with the event mode; report "
         "estimates, 95% CIs, derived e and t_c, correlations, outliers and an identifiability verdict. "
         "Several files are fitted jointly: kappa, k_r (and drag) shared, each file its own x0, v0, offset. "
-        "Exit status: 0 converged, 3 not converged (the JSON is still written, with converged: false), "
-        "2 bad input.",
+        "The clock offset of impact onsets is fitted by default (--freeze offset holds it). Exit status: 0 "
+        "converged, 3 not converged or contradicted by the data's own closed-form restitution or release "
+        "height (the JSON is still written, with converged: false and the reasons), 2 bad input.",
     )
     p.add_argument(
         "data",
@@ -42,6 +43,14 @@ def add_identify(commands) -> None:
         metavar="NAMES",
         help="nuisance parameters to fit too, comma-separated from drag,x0,v0,offset (offset: the recording's "
         "unknown time origin, for impact onsets and traces)",
+    )
+    p.add_argument(
+        "--freeze",
+        default="",
+        metavar="NAMES",
+        help="parameters held at their file values, comma-separated from kappa,k_r,drag,x0,v0,offset (e.g. "
+        "offset, when impact onsets are timed from the release; by default the offset of impact onsets is "
+        "fitted)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the starts' jitter (default 0)")
     p.add_argument("--method", choices=("lm", "optax"), default="lm", help="lm (default) or optax then lm")
@@ -83,7 +92,7 @@ EXIT_NOT_CONVERGED = 3
 def _run_identify(args) -> int:
     import json
 
-    from identify import NUISANCE, fit, load_dataset
+    from identify import NUISANCE, PARAMETERS, fit, load_dataset
 
     from ..internal import EXIT_OK, RunError, check_output_paths, write_atomically
     from ._main import check_plot_format
@@ -92,6 +101,10 @@ def _run_identify(args) -> int:
     for name in nuisance:
         if name not in NUISANCE:
             raise ValueError(f"--fit {name!r} is not a nuisance parameter; valid: {', '.join(NUISANCE)}")
+    freeze = tuple(name.strip() for name in args.freeze.split(",") if name.strip())
+    for name in freeze:
+        if name not in PARAMETERS:
+            raise ValueError(f"--freeze {name!r} is not a parameter; valid: {', '.join(PARAMETERS)}")
     if args.starts < 1:
         raise ValueError(f"--starts {args.starts} is out of range; valid range is integers >= 1")
     paths = list(args.data) or [default_data_path()]
@@ -102,6 +115,7 @@ def _run_identify(args) -> int:
     result = fit(
         data if len(data) > 1 else data[0],
         nuisance=nuisance,
+        freeze=freeze,
         starts=args.starts,
         seed=args.seed,
         method=args.method,
@@ -127,6 +141,11 @@ def _run_identify(args) -> int:
             print(f"wrote {args.plot}")
     except OSError as err:
         raise RunError(f"cannot write output: {err}") from None
+    if result.contradictions:
+        for reason in result.contradictions:
+            print(f"rejected: {reason}")
+        print(f"the fit contradicts its own data (nothing is identifiable): exit status {EXIT_NOT_CONVERGED}")
+        return EXIT_NOT_CONVERGED
     if not result.converged:
         print(f"the fit did not converge ({result.message}): exit status {EXIT_NOT_CONVERGED}")
         return EXIT_NOT_CONVERGED

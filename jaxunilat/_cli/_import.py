@@ -14,8 +14,8 @@ left out as `##` comment lines. The source is only read; an output path that nam
 from __future__ import annotations
 
 _X0_IMPACTS = (
-    "release height x0, m (default: estimated from the first interval T1 assuming e = 0.95 and no drag, "
-    "x0 = g T1^2 / (8 e^2); the file says so in a ## comment)"
+    "release height x0, m (default: estimated from the first interval T1 with the e of the interval ratios "
+    "(0.95 where they give none) and no drag, x0 = g T1^2 / (8 e^2); the file says so in a ## comment)"
 )
 
 
@@ -32,6 +32,13 @@ def _source_kind(sources, kind: str, *, source_help: str, x0_help: str, noise_he
     p.add_argument("--v0", type=float, help="velocity at t = 0, m/s (default 0: released from rest)")
     p.add_argument("--noise", type=float, metavar="S", help=noise_help)
     p.add_argument("--plot", metavar="PNG", help="draw what was imported (kept and rejected onsets)")
+    if kind != "video":
+        p.add_argument(
+            "--force",
+            action="store_true",
+            help="write the data file even when the onsets are not those of one bouncing ball (intervals "
+            "that do not decay, a broken ratio chain); by default such an import is refused with exit 3",
+        )
     p.set_defaults(func=_run_import)
     return p
 
@@ -55,27 +62,43 @@ def add_import(commands) -> None:
         noise_help="onset-time standard deviation, s (default: the timing-noise estimate)",
         help="impact onsets from a WAV recording of a bouncing ball",
         description="Detect the impact clicks in a WAV file (PCM 16/24/32-bit or float 32/64-bit, mono or "
-        "stereo, 8-96 kHz): coarse detection above THRESHOLD x the robust noise floor with a dead time, then "
-        "the onset refined to the start of each click (where its envelope first exceeds 10% of its own "
-        "peak and 5 noise sigma). Quiet clicks where no bounce can be (the intervals of a ball decay "
-        "smoothly) and echoes closer than MIN_GAP to a louder click are rejected and reported. Writes "
-        "observe = impacts; noise defaults to the timing-noise estimate (the scatter of the intervals about "
-        "a smooth fit, /sqrt(2), at least one sample period).",
+        "stereo, 8-96 kHz) with one set of defaults for every recording: the noise floor is measured in the "
+        "recording's quiet parts; a candidate click must RISE FROM BELOW (its first millisecond RISE times "
+        "louder than the loudest of the 20 ms before, so the ringing after each click is a decaying "
+        "threshold) and peak above THRESHOLD noise sigma; its onset is refined to the click's start (where "
+        "its envelope first exceeds 10%% of its own peak). The bounces are then the chain of candidates "
+        "whose intervals shrink as a bouncing ball's do (successive ratios near a slowly drifting "
+        "restitution; up to 2 missed quiet bounces in a row are inferred). Every other candidate is left "
+        "out with its reason: sound before the drop (handling, the release), echoes and ringing closer than "
+        "MIN_GAP to a bounce, spurious clicks where no bounce can be. Onsets that are not one bouncing "
+        "ball's are refused (exit 3) unless --force. Writes observe = impacts; noise defaults to the "
+        "timing-noise estimate (the scatter of the intervals about a smooth fit, /sqrt(2), at least one "
+        "sample period).",
     )
     w.add_argument(
-        "--threshold", type=float, default=8.0, help="coarse detection level, in noise sigma (default 8)"
+        "--threshold",
+        type=float,
+        default=None,
+        help="the least peak of a click, in noise sigma of the quiet parts (default 8)",
+    )
+    w.add_argument(
+        "--rise",
+        type=float,
+        default=None,
+        help="how many times louder than its recent past (the 20 ms before) a click must rise (default 2.5)",
     )
     w.add_argument(
         "--dead-time",
         type=float,
-        default=0.02,
-        help="s after a detection during which no new click starts (default 0.02)",
+        default=None,
+        help="s after a click's detection in which a new rise is the same click (default 0.02)",
     )
     w.add_argument(
         "--min-gap",
         type=float,
-        default=0.03,
-        help="s; a click closer than this to a louder one is an echo or double trigger (default 0.03)",
+        default=None,
+        help="s; the shortest interval between bounces: a click closer than this to a bounce is an echo or "
+        "double trigger (default 0.03)",
     )
 
     _source_kind(
@@ -115,6 +138,39 @@ def add_import(commands) -> None:
     )
 
 
+EXIT_NOT_A_BALL = 3
+
+
+def _detector_options(args) -> dict:
+    """The WAV detector's settings given on the command line (none: its defaults)."""
+    names = ("threshold", "rise", "dead_time", "min_gap")
+    return {name: getattr(args, name) for name in names if getattr(args, name, None) is not None}
+
+
+def _refused(err, args) -> int:
+    """Report an import whose onsets are not a bouncing ball's: the import's summary, the
+    reasons, the figure if asked for; nothing written; exit 3."""
+    from ..internal import PROG
+
+    if err.result is not None:
+        print(err.result.summary())
+        if args.plot is not None:
+            import identify
+
+            from ..plot import save_figure
+
+            plot = identify.plot_detection if args.source_kind == "wav" else identify.plot_table_import
+            save_figure(plot(err.result), args.plot)
+            print(f"{'wrote':<10} {args.plot}")
+    for problem in err.problems:
+        print(f"{PROG}: not a bouncing ball: {problem}")
+    print(
+        f"{PROG}: nothing written to {args.out}; check the recording (--plot shows it), or pass --force "
+        f"to write it anyway: exit status {EXIT_NOT_A_BALL}"
+    )
+    return EXIT_NOT_A_BALL
+
+
 def _run_import(args) -> int:
     from ..internal import EXIT_OK, RunError, check_output_paths
     from ._main import check_plot_format
@@ -124,14 +180,15 @@ def _run_import(args) -> int:
     import identify
 
     common = dict(mass=args.mass, drag=args.drag, x0=args.x0, v0=args.v0, noise=args.noise)
-    if args.source_kind == "wav":
-        result = identify.import_wav(
-            args.source, threshold=args.threshold, dead_time=args.dead_time, min_gap=args.min_gap, **common
-        )
-    elif args.source_kind == "phyphox":
-        result = identify.import_phyphox(args.source, **common)
-    else:
-        result = identify.import_video(args.source, column=args.column, scale=args.scale, **common)
+    try:
+        if args.source_kind == "wav":
+            result = identify.import_wav(args.source, force=args.force, **_detector_options(args), **common)
+        elif args.source_kind == "phyphox":
+            result = identify.import_phyphox(args.source, force=args.force, **common)
+        else:
+            result = identify.import_video(args.source, column=args.column, scale=args.scale, **common)
+    except identify.ImplausibleRecording as err:
+        return _refused(err, args)
     print(result.summary())
     try:
         result.write(args.out, overwrite=True)

@@ -1,0 +1,176 @@
+"""The closed-form check of a fit: what the data say on their own, before any model.
+
+A drop recorded as impact onsets carries its restitution in closed form: each flight's
+launch and landing speeds follow from its duration (drag included,
+`identify.bounce_restitution`), and their ratios are the per-bounce e. A least-squares
+fit through the event mode can still land in a wrong basin (onsets matched to the
+wrong predicted bounces, a release height that does not fit the first flight) and
+report a confident number there. This check compares the fit with the closed form,
+file by file; a fit that contradicts it is not reported as converged, nothing is
+called identifiable, and the command line exits 3 saying why.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+#: The fewest onsets from which a file's closed-form e is trusted (3 flights).
+MIN_ONSETS = 4
+#: The least disagreement in e that counts as a contradiction (drag and contact-time
+#: corrections of the closed form are good to about 1%).
+E_TOLERANCE = 0.03
+#: Contact laws whose e depends on the impact speed get a wider tolerance.
+E_TOLERANCE_SPEED_DEPENDENT = 0.06
+#: A first flight whose e (from the stated release height) departs from the later
+#: bounces' by more than this does not follow from that height.
+FIRST_TOLERANCE = 0.08
+
+
+@dataclasses.dataclass(frozen=True)
+class ClosedForm:
+    """A file's restitution from its flight times alone.
+
+    - `restitution`: the median per-bounce e of the flights after the first (drag-
+      corrected; a flight that spans a missed bounce is left out).
+    - `spread`: the robust standard deviation of those per-bounce e.
+    - `count`: how many bounces the median is over.
+    - `first`: bounce 1's e computed from the stated release height x0 (None where the
+      file is not a drop from rest).
+    """
+
+    restitution: float
+    spread: float
+    count: int
+    first: float | None
+
+    @property
+    def standard_error(self) -> float:
+        """The closed form's own uncertainty, ≈ 1.25 spread / √count (a median's)."""
+        return 1.2533 * self.spread / math.sqrt(max(self.count, 1))
+
+
+def closed_form(d) -> ClosedForm | None:
+    """The closed-form restitution of an impacts data set `d` of a drop; None where the
+    file has no closed form (another observation or scene, too few onsets)."""
+    from ._import import ratio_chain
+    from ._restitution import bounce_restitution
+
+    if d.observe != "impacts" or d.scene != "drop" or len(d.t) < MIN_ONSETS:
+        return None
+    t = np.asarray(d.t, dtype=float)
+    if np.any(np.diff(t) <= 0):
+        return None
+    drop = float(d.x0) if d.v0 == 0 and d.x0 > 0 else None
+    try:
+        b = bounce_restitution(t, drag=float(d.drag), gravity=float(d.gravity), drop_height=drop)
+    except ValueError:
+        return None
+    spans = ratio_chain(t).spans  # flights per interval: > 1 after a missed bounce
+    index = np.asarray(b.index)
+    later_bounce = (index >= 1) & (index < len(spans))
+    i = index[later_bounce]
+    single = (spans[i - 1] == 1) & (spans[i] == 1)  # bounce i joins flights i - 1 and i
+    later = np.asarray(b.restitution)[later_bounce][single]
+    later = later[np.isfinite(later)]
+    if len(later) < 2:
+        return None
+    median = float(np.median(later))
+    spread = 1.4826 * float(np.median(np.abs(later - median)))
+    first = None
+    if drop is not None and len(b.index) and b.index[0] == 0 and spans[0] == 1:
+        first = float(b.restitution[0])
+    return ClosedForm(restitution=median, spread=spread, count=len(later), first=first)
+
+
+def _tolerance(law: str, form: ClosedForm) -> float:
+    base = E_TOLERANCE if law == "kelvin-voigt" else E_TOLERANCE_SPEED_DEPENDENT
+    return max(base, 4.0 * form.standard_error)
+
+
+def _name(d, f: int) -> str:
+    import os
+
+    return os.path.basename(d.path) if d.path else f"data set {f + 1}"
+
+
+def contradictions(result) -> list[str]:
+    """Why `result` (an `identify.FitResult`) contradicts its data's closed forms; [].
+
+    Per file of impact onsets: the fitted e (the file's own "alone" e in a joint fit)
+    must lie within max(0.03, 4 standard errors) of the closed form (0.06 for a law whose
+    e depends on the impact speed), and, where x0 is held at the stated release height,
+    the first flight must follow from that height (its e within 0.08 of the later
+    bounces'). A joint fit's shared e must lie within the files' own closed forms.
+    """
+    out = []
+    files = result.datasets_data or []
+    forms = [closed_form(d) for d in files]
+    fitted_x0 = "x0" in result.free
+    for f, (d, form) in enumerate(zip(files, forms, strict=True)):
+        if form is None:
+            continue
+        e_fit = _file_restitution(result, f, len(files))
+        tol = _tolerance(result.law, form)
+        if e_fit is not None and not abs(e_fit - form.restitution) <= tol:
+            out.append(
+                f"{_name(d, f)}: the fit's e = {e_fit:.4f} contradicts the e = {form.restitution:.4f} "
+                f"(± {tol:.3f}) that the file's own flight times give in closed form (drag-corrected "
+                f"median of {form.count} bounces): a wrong basin of the fit"
+            )
+        if not fitted_x0 and form.first is not None and abs(form.first - form.restitution) > FIRST_TOLERANCE:
+            h = _implied_height(d, form)
+            out.append(
+                f"{_name(d, f)}: the first flight ({float(d.t[1] - d.t[0]):.4f} s) cannot follow a drop from "
+                f"the stated x0 = {float(d.x0):.4g} m with e = {form.restitution:.3f}; it implies about "
+                f"{h:.3g} m. The recording may start at a later bounce, or x0 is wrong: give the right "
+                "height, or fit it (--fit x0)"
+            )
+    known = [form.restitution for form in forms if form is not None]
+    if len(files) > 1 and len(known) >= 2:
+        e_joint = result.derived["restitution"]["value"]
+        lo, hi = min(known) - E_TOLERANCE, max(known) + E_TOLERANCE
+        if not lo <= e_joint <= hi:
+            out.append(
+                f"the joint fit's e = {e_joint:.4f} lies outside the files' own closed-form range "
+                f"{min(known):.4f}-{max(known):.4f}"
+            )
+    return out
+
+
+def _file_restitution(result, f: int, n_files: int) -> float | None:
+    if n_files == 1:
+        value = result.derived["restitution"]["value"]
+    else:
+        alone = result.datasets[f].get("restitution_alone") if f < len(result.datasets) else None
+        value = None if alone is None else alone.get("value")
+    return float(value) if value is not None and math.isfinite(value) else None
+
+
+def _implied_height(d, form: ClosedForm) -> float:
+    """The release height (m) whose first impact speed, times e, launches the first flight."""
+    from ._restitution import bounce_restitution
+
+    b = bounce_restitution(
+        np.asarray(d.t, float), drag=float(d.drag), gravity=float(d.gravity), drop_height=float(d.x0)
+    )
+    launch = float(np.asarray(b.rebound_speed)[np.asarray(b.index) == 0][0])
+    w = launch / form.restitution  # the first impact speed
+    k, g = float(d.drag), float(d.gravity)
+    if k > 0 and k * w < 1:
+        return -math.log(1.0 - (k * w) ** 2) / (2.0 * g * k * k)
+    return w * w / (2.0 * g)
+
+
+def apply(result) -> None:
+    """Run `contradictions` on `result` and, where any, mark it: not converged, nothing
+    identifiable, the reasons in `result.contradictions` and the message."""
+    found = contradictions(result)
+    result.contradictions = found
+    if not found:
+        return
+    result.converged = False
+    result.message = "the fit contradicts the data's closed form: " + "; ".join(found)
+    result.identifiable = {name: False for name in result.identifiable}
