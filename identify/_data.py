@@ -329,6 +329,29 @@ def _read_text(path) -> tuple[str, str]:
     return text.removeprefix("\ufeff"), name
 
 
+def _export_hint(head: list[str]) -> str:
+    """A pointer to the importers when the first lines look like a recorder's or a
+    tracker's table (semicolons, decimal commas, tabs, unit headers) rather than this format."""
+    text = "\n".join(head)
+    low = text.lower()
+    tabular = (
+        ";" in text
+        or "\t" in text
+        or re.search(r"\d,\d+\s*[;\t]", text) is not None
+        or re.search(r"\((s|ms|m|cm|mm|px)\)", low) is not None
+    )
+    if "event" in low or "interval" in low:
+        return " this looks like a phyphox export: convert it with jaxunilat import phyphox"
+    if re.search(r"\b(y|x|height)\s*\((m|cm|mm|px)\)", low) or "mass a" in low:
+        return " this looks like a video-tracking export: convert it with jaxunilat import video"
+    if tabular:
+        return (
+            " this looks like a phyphox or video export (separators, decimal commas or units in the header): "
+            "convert it with jaxunilat import phyphox (onset times) or jaxunilat import video (tracked heights)"
+        )
+    return ""
+
+
 def _number(token: str, where: str, unit: str = "") -> float:
     if _NUMBER.fullmatch(token):
         return float(token)
@@ -364,7 +387,7 @@ def _parse(text: str, name: str) -> Dataset:
     if version is None:
         raise ValueError(
             f"{name}: line 1: expected {_FIRST_LINE!r} as the first line, got {lines[0][:60]!r} "
-            "(is this a jaxunilat data file?)"
+            f"(is this a jaxunilat data file?{_export_hint(lines[:5])})"
         )
     if version.group(1) != str(FORMAT_VERSION):
         raise ValueError(

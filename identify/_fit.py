@@ -35,6 +35,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import os
 import time
 
 import equinox as eqx
@@ -189,6 +190,9 @@ class _Options:
     threshold: float
     holdout: float
     gradient: str
+    bounds: dict = dataclasses.field(default_factory=dict)
+    tol: float = 1e-10
+    alone_starts: bool = True
 
 
 @dataclasses.dataclass
@@ -285,6 +289,10 @@ def fit(
     """
     began = time.perf_counter()
     datasets = _load_all(data)
+    _refuse_duplicates(datasets)
+    originals = list(datasets)
+    datasets, clocks = _shift_clocks(datasets)
+    initial, bounds = _shift_offset_arguments(initial, bounds, clocks)
     nuisance, offset_note = _default_nuisance(datasets, tuple(nuisance), tuple(freeze))
     opts = _check_arguments(
         datasets, nuisance, freeze, starts, steps, max_iterations, tol, rel_halfwidth, optimizer, method,
@@ -292,6 +300,7 @@ def fit(
     )  # fmt: skip
     check_choice("law", law, (*LAWS, "auto"))
     initial, bounds = _check_start(initial, bounds)
+    opts = dataclasses.replace(opts, bounds=bounds, tol=tol)
     laws = LAWS if law == "auto" else (law,)
     results = {}
     for name in laws:
@@ -309,24 +318,148 @@ def fit(
     if offset_note:
         result.notes.append(offset_note)
     plausible.apply(result)
+    if any(clocks):
+        _restore_clocks(result, originals, clocks)
     result.wall_s = time.perf_counter() - began
     return result
 
 
-def _default_nuisance(datasets, nuisance: tuple, freeze: tuple) -> tuple[tuple, str]:
-    """`nuisance` with the clock offset added where a file holds impact onsets: no
-    recorder knows the release instant, so the offset is always unknown there (hold it
-    with `freeze=("offset",)` when the onsets are timed from the release). Returns the
-    nuisance tuple and a note for the report ("" when nothing was added)."""
-    if "offset" in nuisance or "offset" in freeze:
-        return nuisance, ""
-    if not any(d.observe == "impacts" for d in datasets):
-        return nuisance, ""
-    note = (
-        "clock offset fitted (impact onsets: a recording does not know the release instant; "
-        "hold it with --freeze offset, or freeze=('offset',) in Python, if the onsets are timed from the release)"
+def _refuse_duplicates(datasets) -> None:
+    """Refuse one data set given twice (the same file, or a copy: identical rows).
+
+    Its rows would count twice and every interval would shrink by √2 with no new
+    information."""
+    seen = {}
+    for f, d in enumerate(datasets):
+        columns = tuple(None if c is None else np.asarray(c).tobytes() for c in (d.t, d.x, d.h))
+        key = (d.observe, *columns)
+        if key in seen:
+            g = seen[key]
+            raise ValueError(
+                f"data = files {g + 1} and {f + 1} ({datasets[g].path or 'in memory'}, {d.path or 'in memory'}) "
+                f"hold identical {d.observe} rows ({d.num_rows} rows): the same data given twice would "
+                "count every row twice and shrink the intervals by sqrt(2); valid: each data set once"
+            )
+        seen[key] = f
+
+
+#: Impact onsets whose first time lies beyond this many seconds are on an absolute clock
+#: (e.g. Unix seconds, ~1.7e9 s): the fit runs on times relative to the first onset
+#: (float64 keeps ~2e-7 s at 1.7e9 s, and the offset's bounds and tolerances are scaled
+#: for recording clocks) and adds that reference back to the reported offset.
+ABSOLUTE_CLOCK_S = 1e3
+
+
+def _shift_clocks(datasets) -> tuple[list, list[float]]:
+    """Impact files on an absolute clock, re-timed from their first onset; each file's shift (s)."""
+    out, shifts = [], []
+    for d in datasets:
+        if d.observe == "impacts" and abs(float(d.t[0])) > ABSOLUTE_CLOCK_S:
+            ref = float(d.t[0])
+            out.append(dataclasses.replace(d, t=np.asarray(d.t) - ref))
+            shifts.append(ref)
+        else:
+            out.append(d)
+            shifts.append(0.0)
+    return out, shifts
+
+
+def _shift_offset_arguments(initial, bounds, clocks):
+    """`initial`/`bounds` of the offset on the shifted clock (one shift: every file's)."""
+    if not any(clocks) or not ({"offset"} & (set(initial or {}) | set(bounds or {}))):
+        return initial, bounds
+    if len(set(clocks)) > 1:
+        raise ValueError(
+            "initial/bounds for 'offset' with several files on different absolute clocks: one offset value "
+            "cannot be given for all of them; valid: leave the offset's initial value and bounds out"
+        )
+    ref = clocks[0]
+    initial = dict(initial or {})
+    bounds = dict(bounds or {})
+    if "offset" in initial:
+        initial["offset"] = float(initial["offset"]) - ref
+    if "offset" in bounds:
+        lo, hi = bounds["offset"]
+        bounds["offset"] = (float(lo) - ref, float(hi) - ref)
+    return initial, bounds
+
+
+def _restore_clocks(result, originals, clocks) -> None:
+    """Report offsets on the files' own absolute clocks again (see `ABSOLUTE_CLOCK_S`)."""
+    import jax.numpy as jnp
+
+    from ._joint import Layout
+
+    n = len(originals)
+    layout = Layout(n_files=n)
+    i_off = PARAMETERS.index("offset")
+    if result.joint_z is not None and np.asarray(result.joint_z).size == layout.size:
+        z = np.array(result.joint_z, dtype=float)
+        for f, ref in enumerate(clocks):
+            z[layout.index[f, i_off]] += ref
+        result.joint_z = z
+    result.z = np.array(result.z, dtype=float)
+    result.z[i_off] += clocks[0]
+    entry = result.parameters["offset"]
+    result.parameters["offset"] = {
+        **entry,
+        "value": entry["value"] + clocks[0],
+        "ci95": [v + clocks[0] for v in entry["ci95"]],
+    }
+    for f, ref in enumerate(clocks):
+        if f < len(result.datasets):
+            own = result.datasets[f]["parameters"].get("offset")
+            if own is not None:
+                own["value"] += ref
+                own["ci95"] = [v + ref for v in own["ci95"]]
+    result.data = originals[0]
+    result.datasets_data = list(originals)
+    if clocks[0]:
+        problem = result.problem
+        result.problem = eqx.tree_at(
+            lambda p: (p.y_obs, p.t_obs),
+            problem,
+            (jnp.asarray(problem.y_obs) + clocks[0], jnp.asarray(problem.t_obs) + clocks[0]),
+        )
+    result.notes.append(
+        "onsets on an absolute clock: fitted relative to each file's first onset, the offset reported on the file's "
+        "own clock"
     )
-    return (*nuisance, "offset"), note
+
+
+def _default_nuisance(datasets, nuisance: tuple, freeze: tuple) -> tuple[tuple, str]:
+    """`nuisance` with what the data determine and no recorder knows added by default.
+
+    - The clock offset where a file holds impact onsets: no recorder knows the release
+      instant (hold it with `freeze=("offset",)` when the onsets are timed from the release).
+    - The release state x0, v0 of traces whose x0 is their own first sample (the video
+      importer's default): held there, every estimate would follow that one sample's noise
+      (κ from 13k to 56k N/m across noise seeds of a 1 mm trace, intervals excluding the
+      truth); a trace determines both. Only when every file is a trace, and not for x0
+      stated apart from the samples (the bundled trace: x0 = 0.305 m, first sample 0.304705 m).
+
+    Returns the nuisance tuple and a note for the report ("" when nothing was added)."""
+    notes = []
+    if "offset" not in nuisance and "offset" not in freeze and any(d.observe == "impacts" for d in datasets):
+        notes.append(
+            "clock offset fitted (impact onsets: a recording does not know the release instant; "
+            "hold it with --freeze offset, or freeze=('offset',) in Python, if the onsets are timed from the release)"
+        )
+        nuisance = (*nuisance, "offset")
+    if all(_x0_from_sample(d) for d in datasets):
+        added = tuple(n for n in ("x0", "v0") if n not in nuisance and n not in freeze)
+        if added:
+            nuisance = (*nuisance, *added)
+            notes.append(
+                f"{', '.join(added)} fitted: the file's x0 is its first sample's height, and one noisy sample "
+                "must not pin the release (hold them with --freeze x0,v0, or freeze=('x0', 'v0') in Python)"
+            )
+    return nuisance, "; ".join(notes)
+
+
+def _x0_from_sample(d) -> bool:
+    """Whether a trace's x0 is its first sample's position at t = 0 (as `import video` writes it)."""
+    return d.observe == "trace" and float(d.t[0]) == 0.0 and float(d.x[0]) == float(d.x0)
 
 
 def _check_arguments(
@@ -400,17 +533,27 @@ def _fit_law(setup, opts: _Options) -> FitResult:
     """Every stage for one contact law: starts, windows, robust pass, final pass, summary."""
     began = time.perf_counter()
     rows = Rows.make(setup.n_rows, opts.holdout)
+    _check_counts(setup, rows)
+    prior = setup.evaluator.prior
+    alone_starts = _alone_starts(setup, opts) if opts.alone_starts else []
     e0, e_source = _initial_restitution(setup, rows)
     candidates = start_points(setup, e0, opts.starts, np.random.default_rng(opts.seed))
     runs = _run_starts(setup, candidates, rows, opts)
-    best = min(runs, key=lambda run: run.cost)
-    for fraction in _windows(setup)[1:]:
-        out = _lm(setup, best.z, _weights(setup, rows, fraction), opts, dchi2=1e-2)
-        best = best.then(out)
+    best = _windows_from(setup, min(runs, key=lambda run: run.cost), rows, opts)
     scale = None
     if not opts.keep_outliers:
         best, rows, scale = _robust_pass(setup, best, rows, opts)
     best = _final_pass(setup, best, rows, opts)
+    restarts = []
+    for f, z in alone_starts:
+        # The same stages from file f's own solution, on the rows the main path kept: a
+        # joint LM can stop on the long κ–k_r–t_c valley well above a point it can reach.
+        setup.evaluator.prior = prior
+        first = _Point.from_lm(_lm(setup, z, _weights(setup, rows, _windows(setup)[0]), opts, dchi2=1e-2))
+        point = _final_pass(setup, _windows_from(setup, first, rows, opts), rows, opts)
+        restarts.append((f, point.cost))
+        if math.isfinite(point.cost) and point.cost < best.cost:
+            best = dataclasses.replace(point, iterations=best.iterations + point.iterations)
     onsets = None
     if _scatter_model_applies(setup, best, rows):
         onsets = best
@@ -422,10 +565,107 @@ def _fit_law(setup, opts: _Options) -> FitResult:
     result = summarize_fit(
         setup, best, rows, opts, runs=runs, initial=initial, robust_scale=scale, onsets=onsets
     )
+    if restarts:
+        names = [d.path or f"data set {f + 1}" for f, d in enumerate(setup.datasets)]
+        result.notes.append(
+            "joint fit also started from each file's own solution (fitted alone, one start); final chi-square "
+            "over all fitted rows of this fit: "
+            + ", ".join(f"from {os.path.basename(names[f])}: {2 * c:.6g}" for f, c in restarts)
+        )
     if opts.profile and setup.layout.index[0, 0] in setup.free:
         result.profile = _profile_kappa(setup, best, rows, result, opts)
+        _check_profile_minimum(result, best, setup)
     result.wall_s = time.perf_counter() - began
     return result
+
+
+def _windows_from(setup, point: _Point, rows, opts) -> _Point:
+    """The growing windows after the first, from `point` (loose LM on each)."""
+    for fraction in _windows(setup)[1:]:
+        point = point.then(_lm(setup, point.z, _weights(setup, rows, fraction), opts, dchi2=1e-2))
+    return point
+
+
+def _check_counts(setup, rows) -> None:
+    """Refuse a fit with more free parameters than fitted data rows (or as many, when the
+    noise is estimated from the residuals): its residuals vanish and its values would
+    print as exact."""
+    n, p = int(rows.fitted.sum()), len(setup.free)
+    need = p if setup.sigma_known else p + 1
+    if n < need:
+        names = ", ".join(
+            "/".join(str(x) for x in setup.layout.names()[j] if x is not None) for j in setup.free
+        )
+        raise ValueError(
+            f"data rows = {n} fitted against {p} free parameters ({names}); valid: at least {need} fitted rows "
+            + ("(one more than the free parameters, since no noise is stated and it is estimated from the residuals)"
+               if not setup.sigma_known else "(one per free parameter)")
+            + ": give more data, or fit fewer parameters (--freeze)"
+        )  # fmt: skip
+
+
+#: Joint fits of at most this many files also start from each file's own solution (one
+#: alone fit per file: one compilation and a one-start fit each, seconds per file).
+MAX_ALONE_STARTS = 4
+
+
+def _alone_starts(setup, opts) -> list[tuple[int, np.ndarray]]:
+    """Joint start points from each file fitted alone (one start, no robust pass):
+    κ, k_r (and drag) from file f's own optimum, every file's x0, v0 and offset from its own."""
+    n = setup.layout.n_files
+    if n < 2 or n > MAX_ALONE_STARTS:
+        return []
+    alone = dataclasses.replace(
+        opts, starts=1, method="lm", alone_starts=False, profile=False, progress=False
+    )
+    own = []
+    for d in setup.datasets:
+        one = build(
+            [d], law=setup.law, nuisance=opts.nuisance, freeze=opts.freeze, initial=setup.initial,
+            bounds=opts.bounds, tol=opts.tol,
+        )  # fmt: skip
+        rows = Rows.make(one.n_rows, opts.holdout)
+        e0, _ = _initial_restitution(one, rows)
+        runs = _run_starts(one, start_points(one, e0, 1, np.random.default_rng(opts.seed)), rows, alone)
+        point = _final_pass(one, _windows_from(one, runs[0], rows, alone), rows, alone)
+        setup.evaluator.calls += one.evaluator.calls
+        own.append(np.asarray(point.z) if math.isfinite(point.cost) else None)
+    if any(z is None for z in own):
+        return []
+    out = []
+    for f in range(n):
+        z = setup.layout.join(own)
+        shared = [PARAMETERS.index(name) for name in setup.layout.shared]
+        z[setup.layout.index[0, shared]] = own[f][shared]
+        out.append((f, np.clip(z, setup.lo, setup.hi)))
+    return out
+
+
+#: A profile point this many χ² units below the fit's own χ² means the fit is not at its
+#: minimum (the LM's stall test counts 0.1 reduced χ² over ten steps as flat).
+PROFILE_SLACK = 0.1
+
+
+def _check_profile_minimum(result, best: _Point, setup) -> None:
+    """A profile that finds a lower χ² than the fit: the fit is not at its minimum."""
+    prof = result.profile
+    s2 = (result.sigma / float(setup.sigmas[0])) ** 2
+    costs = prof.get("costs")
+    if costs is None:
+        return
+    finite = costs[np.isfinite(costs)]
+    if finite.size == 0:
+        return
+    lower = 2.0 * (best.cost - float(np.min(finite))) / s2
+    prof["below_fit"] = float(max(lower, 0.0))
+    if lower > PROFILE_SLACK:
+        k = float(prof["kappa"][int(np.argmin(np.where(np.isfinite(costs), costs, np.inf)))])
+        result.converged = False
+        result.identifiable = {name: False for name in result.identifiable}
+        result.message = (
+            f"the profile of kappa found a chi-square {lower:.3g} below the fit's at kappa = {k:.6g}: "
+            "the fit stopped short of its minimum"
+        )
 
 
 def _scatter_model_applies(setup, best: _Point, rows) -> bool:
@@ -717,6 +957,7 @@ def _profile_kappa(setup, best, rows, result, opts, points: int = 13):
     return dict(
         kappa=np.exp(grid),
         delta_chi2=delta,
+        costs=costs,
         failed=[float(math.exp(g)) for g, bad in zip(grid, failed, strict=True) if bad],
         ci95=[
             (0.0 if ci[0] == -math.inf else math.exp(ci[0])) if not math.isnan(ci[0]) else math.nan,

@@ -228,6 +228,9 @@ class OnsetDetection:
     - `warnings`: suspicious but kept.
     - `timing_noise`: the timing-noise estimate, s; `timing_noise_method`: how.
     - `settings`: the detection settings used.
+    - `silence`: the fraction of the recording that is digital silence (`digital_silence`).
+    - `floor_notes`: how the noise floor was measured where that is not plain (digital
+      silence, no noise at all), one sentence each.
     """
 
     rate: float
@@ -244,6 +247,8 @@ class OnsetDetection:
     settings: dict
     rise: np.ndarray | None = None
     missed: np.ndarray | None = None
+    silence: float = 0.0
+    floor_notes: tuple[str, ...] = ()
 
     @property
     def onsets(self) -> np.ndarray:
@@ -263,11 +268,41 @@ _QUIET_PERCENTILE = 10.0  # ...and taken at this percentile of the segments (the
 _START_GUARD = _PAST_WINDOW  # s: a click this close to the recording's start has no past to rise from
 
 
-def noise_floor(env: np.ndarray, rate: float) -> float:
+#: A run of exactly repeated samples at least this long, s (and 16 samples), is digital
+#: silence (a noise gate, a muted stretch): no noise to measure there.
+_SILENT_RUN = 1e-3
+
+
+def digital_silence(samples: np.ndarray, rate: float) -> np.ndarray:
+    """Per sample, whether it lies in digital silence: a run of at least `_SILENT_RUN` s
+    (and 16 samples) of exactly repeated values (samples full scale, `rate` Hz). A noise
+    gate writes such runs between clicks; real noise, even at one least significant bit,
+    does not repeat a value that long."""
+    x = np.asarray(samples)
+    n = max(16, int(round(_SILENT_RUN * rate)))
+    same = np.concatenate([[0], (x[1:] == x[:-1]).astype(np.int8), [0]])
+    edges = np.flatnonzero(np.diff(same))
+    first, last = edges[::2], edges[1::2]  # x[first : last + 1] repeat one value
+    long = last - first + 1 >= n
+    mark = np.zeros(len(x) + 1, dtype=np.int64)
+    np.add.at(mark, first[long], 1)
+    np.add.at(mark, last[long] + 1, -1)
+    return np.cumsum(mark[:-1]) > 0
+
+
+def noise_floor(env: np.ndarray, rate: float, silent: np.ndarray | None = None) -> float:
     """σ of the high-passed signal in the quiet parts of the recording, full-scale units:
     the robust σ (1.4826 × median |x|) of each `_SEGMENT` s segment, at the
     `_QUIET_PERCENTILE` percentile over the segments (digital silence left out). Ringing
-    fills most of a bouncing-ball recording; its quietest segments are the noise."""
+    fills most of a bouncing-ball recording; its quietest segments are the noise.
+
+    `silent`: per sample, digital silence (`digital_silence`; None: none). Its samples are
+    read as a noise gate's where they are at least `GATED` of the recording: the floor is
+    then `_gated_floor`'s (the sound's own, or the level where the gate closes), not that
+    of segments whose silent part hides their quiet half. 0 where nothing but silence is
+    left."""
+    if silent is not None and np.mean(silent) >= GATED:
+        return _gated_floor(env, rate, silent)
     seg = max(16, int(round(_SEGMENT * rate)))
     m = len(env) // seg
     blocks = env[: m * seg].reshape(m, seg) if m else env[None, :]
@@ -276,6 +311,34 @@ def noise_floor(env: np.ndarray, rate: float) -> float:
     if not len(sigma):
         return float(np.std(env)) or 1e-12
     return float(np.percentile(sigma, _QUIET_PERCENTILE))
+
+
+#: A recording is read as noise-gated (`_gated_floor`) when at least this fraction of it is
+#: digital silence; a few silent runs (a muted start, a dropout) leave the floor as it was.
+GATED = 0.05
+#: A noise gate opens at about this many σ of the noise it removes (a gate set just above
+#: the noise's peaks).
+GATE_SIGMAS = 4.0
+
+
+def _gated_floor(env, rate, silent) -> float:
+    """The noise floor of a recording with digital silence (`silent` per sample): the
+    floor of its sound (`noise_floor` on the samples that are not silence: noise where a
+    gate held open after a click), but no more than the level where the gate closes (the
+    rms of the millisecond before each silent run, median over the runs) over
+    `GATE_SIGMAS`: under the gate, sound was there and was cut. 0 if no sound is left."""
+    live = env[~silent]
+    if len(live) < 16:
+        return 0.0
+    floor = noise_floor(live, rate)
+    w = max(2, int(round(_LEVEL_WINDOW * rate)))
+    starts = np.flatnonzero(silent & ~np.concatenate([[True], silent[:-1]]))
+    starts = starts[starts >= w]
+    if len(starts):
+        cum = np.concatenate([[0.0], np.cumsum(env * env)])
+        closing = np.sqrt((cum[starts] - cum[starts - w]) / w)
+        floor = min(floor, float(np.median(closing)) / GATE_SIGMAS)
+    return floor
 
 
 def rise_ratio(hp: np.ndarray, rate: float, sigma: float) -> tuple[np.ndarray, np.ndarray]:
@@ -419,7 +482,8 @@ def detect_onsets(
     - `min_gap`: s; the shortest interval between bounces: a click closer than this to a
       kept one is an echo or double trigger (≥ 0; default 0.03).
     - `rel_level`: the onset level as a fraction of the click's own peak ((0, 1); 0.1).
-    - `noise_level`: the onset level's floor, in noise σ (> 0, at most `threshold`; 5).
+    - `noise_level`: the onset level's floor, in noise σ (> 0, at most `threshold`; default 5,
+      or `threshold` if that is lower).
 
     **Returns:** an `OnsetDetection` (every candidate, kept or left out).
     """
@@ -428,6 +492,8 @@ def detect_onsets(
     given = dict(threshold=threshold, rise=rise, dead_time=dead_time, min_gap=min_gap)
     given.update(rel_level=rel_level, noise_level=noise_level)
     s = {k: float(DEFAULTS[k] if v is None else v) for k, v in given.items()}
+    if noise_level is None:  # the default floor follows a threshold set below it
+        s["noise_level"] = min(s["noise_level"], s["threshold"])
     check_range("rate", rate, lo=0.0, lo_open=True, unit="Hz")
     check_range("threshold", s["threshold"], lo=0.0, lo_open=True)
     check_range("rise", s["rise"], lo=1.0, lo_open=True)
@@ -439,7 +505,11 @@ def detect_onsets(
     if x.ndim != 1 or len(x) < 16:
         raise ValueError(f"samples has shape {x.shape}; expected a 1-D array of at least 16 samples")
     env = envelope(x, rate)
-    sigma = noise_floor(env, rate)
+    silent = digital_silence(x, rate)
+    sigma = noise_floor(env, rate, silent)
+    floor_notes = _floor_notes(silent, sigma, rate)
+    if sigma <= 0.0:  # nothing but clicks and digital silence: no noise to measure
+        sigma = UNMEASURED_FLOOR * float(np.max(env)) or 1e-12
     scan = _Scan(x, env, rate, sigma, s)
     cand = scan.clicks()
     coarse, onset, peak, clipped, rises = np.array(cand, dtype=float).reshape(-1, 5).T
@@ -472,6 +542,37 @@ def detect_onsets(
         settings=s,
         rise=rises,
         missed=missed,
+        silence=float(np.mean(silent)),
+        floor_notes=floor_notes,
+    )
+
+
+#: Where a recording has no noise at all (clicks and digital silence only), the floor is
+#: this fraction of its loudest envelope (-60 dB): a wiggle of a decaying tail far below
+#: the clicks is not a click, a bounce 1/100 as loud as the loudest still is.
+UNMEASURED_FLOOR = 1e-3
+
+
+def _floor_notes(silent, sigma, rate) -> tuple[str, ...]:
+    """The notes on the noise floor of a recording with digital silence (`silent` per
+    sample; `sigma`, full scale, as `noise_floor` measured it, 0: nothing to measure)."""
+    frac = float(np.mean(silent))
+    if frac < GATED:
+        return ()
+    what = (
+        f"{100 * frac:.0f}% of the recording is digital silence (runs of exactly repeated samples: a noise "
+        "gate, or muted stretches)"
+    )
+    live = int(np.sum(~silent))
+    if sigma <= 0.0 or live < 2 * _SEGMENT * rate:
+        return (
+            f"{what}, and {live / rate:.3f} s of sound besides it: the noise floor cannot be judged, so it is "
+            f"taken as {UNMEASURED_FLOOR:g} of the loudest click; bounces quieter than that, or than the gate, "
+            "are not found (inferred missed where the chain allows); import the recording without the gate",
+        )
+    return (
+        f"{what}: the noise floor is measured in the rest ({sigma:.3g} of full scale); a bounce too quiet to "
+        "open the gate is not in the file (inferred missed where the chain allows)",
     )
 
 
@@ -653,6 +754,8 @@ def _select(onset, peak, rises, min_gap):
     """Which candidates are bounces: (mask, spans of the kept intervals, rejected)."""
     n = len(onset)
     keep = np.zeros(n, dtype=bool)
+    if not n:
+        return keep, np.ones(0, dtype=int), []
     early = onset < _START_GUARD
     idx = np.flatnonzero(~early)
     weight = 1.0 + 0.5 * np.log10(np.maximum(rises[idx], 1.0)) + 0.25 * np.log10(peak[idx] / peak.max())
@@ -758,6 +861,7 @@ def import_wav(
     )
     if noise is None:
         notes.append("noise = the timing-noise estimate")
+    notes += det.floor_notes
     shift = (det.onset - det.coarse)[det.accepted] * 1e3
     clipped = int(np.sum(det.clipped & det.accepted))
     info = (
@@ -801,6 +905,8 @@ def import_wav(
 #: A second chain of at least this many left-out clicks, this loud (× the kept clicks'
 #: median peak), is a second bouncing sequence.
 SECOND_CHAIN = (5, 0.2)
+#: At most this many bouncing sequences are looked for in one recording.
+MAX_DROPS = 5
 
 
 def second_sequence(det: OnsetDetection) -> list[str]:
@@ -808,19 +914,30 @@ def second_sequence(det: OnsetDetection) -> list[str]:
     candidates left out (the start of the recording aside) themselves hold a chain of at
     least `SECOND_CHAIN[0]` clicks as loud as `SECOND_CHAIN[1]` × the kept ones (several
     drops, or clicks that are not a ball at all: then any chain is one of many)."""
-    out = np.flatnonzero(~det.accepted & (det.onset >= _START_GUARD))
-    if len(out) < SECOND_CHAIN[0] or not det.accepted.any():
+    if not det.accepted.any():
         return []
-    weight = 1.0 + 0.5 * np.log10(np.maximum(det.rise[out], 1.0))
-    chain, _ = select_chain(det.onset[out], weight, min_gap=det.settings["min_gap"])
-    loud = np.median(det.peak[out[chain]]) >= SECOND_CHAIN[1] * np.median(det.peak[det.accepted])
-    if len(chain) < SECOND_CHAIN[0] or not loud:
+    left = ~det.accepted & (det.onset >= _START_GUARD)
+    found = []
+    while len(found) < MAX_DROPS - 1:  # each further sequence among what is still left out
+        out = np.flatnonzero(left)
+        if len(out) < SECOND_CHAIN[0]:
+            break
+        weight = 1.0 + 0.5 * np.log10(np.maximum(det.rise[out], 1.0))
+        chain, _ = select_chain(det.onset[out], weight, min_gap=det.settings["min_gap"])
+        loud = np.median(det.peak[out[chain]]) >= SECOND_CHAIN[1] * np.median(det.peak[det.accepted])
+        if len(chain) < SECOND_CHAIN[0] or not loud:
+            break
+        found.append(det.onset[out[chain]])
+        left[out[chain]] = False
+    if not found:
         return []
-    t = det.onset[out[chain]]
+    starts = sorted([float(det.onsets[0])] + [float(t[0]) for t in found])
+    others = ", ".join(f"{len(t)} clicks ({t[0]:.3f}-{t[-1]:.3f} s)" for t in found)
     return [
-        f"the clicks left out hold another bouncing sequence of {len(chain)} clicks ({t[0]:.3f}-{t[-1]:.3f} s) "
-        f"besides the one kept ({det.onsets[0]:.3f}-{det.onsets[-1]:.3f} s): several drops in one recording, "
-        "or clicks that are not one ball"
+        f"the clicks left out hold {len(found)} more bouncing sequence(s) of {others} besides the one kept "
+        f"({det.onsets[0]:.3f}-{det.onsets[-1]:.3f} s): several drops in one recording (bouncing sequences "
+        f"start at t = {', '.join(f'{t:.3f}' for t in starts)} s: cut the recording before each restart and "
+        "import each drop alone), or clicks that are not one ball"
     ]
 
 

@@ -164,6 +164,25 @@ def _number(cell, decimal: str) -> float | None | str:
     return text
 
 
+#: The largest magnitude a table cell may hold. No recording's time (s, ms) or height (m, cm,
+#: mm) comes near it, even a Unix time stamp in milliseconds; larger values, and those
+#: beyond float64 (1e400 reads as inf), would overflow the import's arithmetic.
+MAX_MAGNITUDE = 1e15
+
+
+def _check_magnitudes(name, unit, n, cells, values, columns) -> None:
+    """Raise `ValueError` naming the file, line and column of the first cell beyond
+    `MAX_MAGNITUDE` (an overflow to infinity included)."""
+    for k, v in enumerate(values):
+        if isinstance(v, float) and not abs(v) <= MAX_MAGNITUDE:
+            text = str(cells[k]).strip().strip('"').strip()
+            why = "beyond float64, it reads as infinity" if math.isinf(v) else "an absurd magnitude"
+            raise ValueError(
+                f"{name}: {unit} {n}: column {columns[k].header!r}: {text!r} is out of range ({why}); "
+                f"valid range is [-{MAX_MAGNITUDE:g}, {MAX_MAGNITUDE:g}] in the column's unit"
+            )
+
+
 def _is_data(cells, decimal) -> bool:
     values = [_number(c, decimal) for c in cells]
     return any(isinstance(v, float) for v in values) and not any(isinstance(v, str) for v in values)
@@ -202,6 +221,7 @@ def _build(name, unit, split, *, sep=None, decimal=".", kind="CSV") -> Table:
             continue
         bad = len(values) != len(columns) or any(isinstance(v, str) for v in values)
         if not bad:
+            _check_magnitudes(name, unit, n, cells, values, columns)
             rows.append((n, values))
             continue
         rest = data[k + 1 :]
@@ -592,6 +612,7 @@ def _timed_events(
         )
         for line, values in table.rows
     ]
+    rows = _unswap(rows, notes)
     convention, how, agrees = _timed_convention(rows) if interval_i is not None else (None, "", True)
     times: list[float] = []
     lines: list[int] = []
@@ -630,6 +651,37 @@ def _timed_events(
         else:
             warnings += _interval_disagreements(rows, convention)
     return times, lines
+
+
+def _unswap(rows: list, notes: list[str]) -> list:
+    """Rows with two adjacent valid onsets in reversed order put back in time order, noted.
+
+    A pair is a swap when, exchanged, it fits between its neighbours and the three
+    intervals around it stay within a factor 2 of each other (successive flights of a
+    ball differ by its e, above 0.5); otherwise the later row stays a stray (rejected as
+    a negative interval), as a row 1 ms before a real onset must."""
+    rows = list(rows)
+    k = 0
+    while k + 1 < len(rows):
+        (la, ta, _), (lb, tb, _) = rows[k], rows[k + 1]
+        if ta is not None and tb is not None and tb < ta:
+            before = rows[k - 1][1] if k > 0 else None
+            after = rows[k + 2][1] if k + 2 < len(rows) else None
+            gaps = [ta - tb]
+            if before is not None:
+                gaps.append(tb - before)
+            if after is not None:
+                gaps.append(after - ta)
+            if len(gaps) > 1 and min(gaps) > 0 and min(gaps) >= 0.5 * max(gaps):
+                rows[k], rows[k + 1] = rows[k + 1], rows[k]
+                notes.append(
+                    f"lines {la} and {lb}: rows out of order (event times {ta:.6f} s and {tb:.6f} s): "
+                    "put back in time order, both kept"
+                )
+                k += 2
+                continue
+        k += 1
+    return rows
 
 
 def _interval_disagreements(rows, convention: str) -> list[str]:

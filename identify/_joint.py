@@ -36,8 +36,8 @@ from jaxunilat.internal import kept_call
 from ._initial import CONTACT_TIME_GUESS
 from ._problem import PARAMETERS, Problem, evaluate_rows, stack_problems
 
-#: Parameters that shift every prediction by their own value (impact onsets + offset):
-#: their Jacobian column is 1/σ exactly, so they take no runs.
+#: Parameters that shift every prediction of impact onsets by their own value (onsets +
+#: offset): their Jacobian column is 1/σ exactly, so they take no runs (traces: differenced).
 SHIFTS = ("offset",)
 #: sd of log t_c in the steering prior: the 0.5–2 ms prior as ±2 sd around 1 ms.
 PRIOR_SD = math.log(2.0) / 2.0
@@ -143,12 +143,23 @@ class JointEvaluator:
     def _file_columns(self, f: int) -> tuple[list[int], list[int]]:
         """Free joint entries file f depends on: (differenced, shifts)."""
         idx = self.layout.index[f]
+        # Only impact onsets are shifted by the offset; a trace's samples are taken at
+        # t − offset, so its column is −v(t)/σ and is differenced like the rest (a 1/σ
+        # column there stopped `--fit offset` on a clean trace at "no decrease found").
+        shifts_here = SHIFTS if self._observe(f) == "impacts" else ()
         fd, shifts = [], []
         for j in self.free:
             where = np.flatnonzero(idx == j)
             if where.size:
-                (fd if PARAMETERS[where[0]] not in SHIFTS else shifts).append(j)
+                (fd if PARAMETERS[where[0]] not in shifts_here else shifts).append(j)
         return fd, shifts
+
+    def _observe(self, f: int) -> str:
+        """File f's observation kind (from its group's stacked problem)."""
+        for g in self.groups:
+            if f in g.files:
+                return g.problem.observe
+        raise AssertionError(f)
 
     @property
     def rows(self) -> int:

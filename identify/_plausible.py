@@ -165,9 +165,15 @@ def _implied_height(d, form: ClosedForm) -> float:
 
 
 def apply(result) -> None:
-    """Run `contradictions` on `result` and, where any, mark it: not converged, nothing
-    identifiable, the reasons in `result.contradictions` and the message."""
+    """Run `contradictions` on `result` (and take a misfit verdict of its noise statement as
+    one) and, where any, mark it: not converged, nothing identifiable, the reasons in
+    `result.contradictions` and the message."""
     found = contradictions(result)
+    noise = result.noise or {}
+    if noise.get("verdict") == "misfit":
+        # Far more residual scatter than the data kind (or the stated noise, or a ball's
+        # bounce-to-bounce variation) can have: the model does not describe the data.
+        found.insert(0, f"the model does not fit the data: {noise.get('text', '')}")
     result.contradictions = found
     if not found:
         return

@@ -434,7 +434,7 @@ def load_fit(path) -> dict:
     if os.path.isdir(name):
         raise ValueError(f"{name}: is a directory, not a fit JSON file")
     try:
-        with open(name, encoding="utf-8") as f:
+        with open(name, encoding="utf-8-sig") as f:
             text = f.read()
     except FileNotFoundError:
         raise ValueError(f"{name}: no such file") from None

@@ -385,13 +385,24 @@ class FitResult:
             f"                         t_c = {self.initial['contact_time'] * 1e3:.3g} ms (prior 0.5-2 ms)"
         )
         lines.append(
-            f"    starts             = {len(self.starts)}, best chi-square of each: " + _costs(self.starts)
+            f"    starts             = {len(self.starts)}, chi-square of each on the first window: "
+            + _costs(self.starts)
+        )
+        lines.append(
+            "                         (rows in the first 35% of each file's span, plus the t_c prior row where used;"
+            " not comparable with the final chi-square below)"
         )
         lines.append(f"    LM iterations      = {self.iterations}")
         lines.append(
             f"    function evals     = {self.simulations} (each one compiled batch of event-mode runs)"
         )
-        lines.append(f"    chi-square         = {self.chi2:.6g}")
+        n_used = int(len(self.residuals) if self.used is None else self.used.sum())
+        rows = (
+            "log ratios of successive flights"
+            if self.sigma_source == "restitution scatter"
+            else "fitted data rows"
+        )
+        lines.append(f"    chi-square         = {self.chi2:.6g} (final point, over the {n_used} {rows})")
         lines.append(f"    reduced chi-square = {self.goodness['reduced_chi2']:.6g}")
         unit = "s" if self.data.observe == "impacts" else "m"
         if self.sigma_source == "restitution scatter":
@@ -403,6 +414,11 @@ class FitResult:
         g = self.goodness
         if g["p_value"] is None:
             lines.append("    fit vs noise       = not tested (sigma estimated from the residuals)")
+        elif self.noise is not None and self.noise.get("verdict") == "overstated":
+            lines.append(
+                f"    fit vs noise       = OVERSTATED noise: chi-square far below its expectation "
+                f"(P(chi2_{g['dof']} <= chi-square) = {1.0 - g['p_value']:.3g})"
+            )
         else:
             verdict = "consistent" if g["consistent"] else "INCONSISTENT"
             lines.append(
@@ -493,12 +509,20 @@ class FitResult:
             lo, hi = self.profile["ci95"]
             b = bound("kappa", {"value": self.kappa, "ci95": [lo, hi]}, units(self.law)["kappa"])
             lines.append("[[Profile likelihood]]")
+            u = units(self.law)["kappa"]
             if b["kind"] == "interval":
-                lines.append(
-                    f"    kappa 95% CI (delta chi2 <= 3.84): [{lo:.6g}, {hi:.6g}] {units(self.law)['kappa']}"
-                )
+                lines.append(f"    kappa 95% CI (delta chi2 <= 3.84): [{lo:.6g}, {hi:.6g}] {u}")
             else:
-                lines.append(f"    kappa (delta chi2 <= 3.84): {b['text']}")
+                lines.append(
+                    f"    kappa 95% CI (delta chi2 <= 3.84): lower end {_profile_end(lo, u, 'lower')}, "
+                    f"upper end {_profile_end(hi, u, 'upper')}"
+                )
+            below = self.profile.get("below_fit")
+            if below is not None and below > 0:
+                lines.append(
+                    f"    the profile reached a chi-square {below:.3g} below the fit's own"
+                    + (": the fit is not at its minimum" if not self.converged else " (within the tolerance)")
+                )
             if self.profile.get("failed"):
                 lines.append(
                     f"    grid points whose re-fit failed (not excluded): {len(self.profile['failed'])}"
@@ -573,6 +597,8 @@ class FitResult:
         if h is None:
             return []
         lines = [f"[[Hold-out]] (the last {h['fraction']:.0%} of each file's rows, predicted)"]
+        if h.get("reason"):
+            return lines + [f"    {h['reason']}"]
         if h["rms"] is None:
             return lines + ["    no held-out row left to predict"]
         scale = 1e3
@@ -583,6 +609,15 @@ class FitResult:
             f" (p = {h['p_value']:.3g})"
         )
         return lines
+
+
+def _profile_end(value: float, unit: str, side: str) -> str:
+    """One end of the profile interval: a value, "unbounded" or "unknown"."""
+    if math.isnan(value):
+        return "unknown (the re-fit next to it failed)"
+    if not math.isfinite(value) or value <= 0 or abs(value) >= ABSURD:
+        return f"unbounded (delta chi2 stays below 3.84 to the {'lowest' if side == 'lower' else 'highest'} kappa tried)"
+    return f"{value:.6g} {unit}"
 
 
 def _finite_or_none(value):

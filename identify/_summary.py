@@ -149,6 +149,7 @@ def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale, onset
         noise = noise_statement(
             d0.observe, setup.sigma_known, float(setup.sigmas[0]),
             onset_scatter if setup.sigma_known else float(sigma_used[0]), goodness, setup.times[0],
+            height=_height(setup),
         )  # fmt: skip
     at_bound = [
         "/".join(str(x) for x in setup.layout.names()[j] if x is not None)
@@ -209,13 +210,33 @@ def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale, onset
     )
 
 
+def _height(setup) -> float | None:
+    """The smallest height scale of the files (`height_scale`), None where none has one."""
+    from ._robust import height_scale
+
+    scales = [h for h in (height_scale(d) for d in setup.datasets) if h is not None]
+    return min(scales) if scales else None
+
+
 def _holdout(setup, rows, r_fit, jac, cov, s2, data_units, fraction, scatter_model) -> dict:
     """The held-out rows: prediction errors in data units, judged against the noise plus
     the fitted parameters' uncertainty in the rows the fit used (onsets, or log ratios
     under the restitution-scatter model)."""
     from ._robust import holdout_summary
 
-    finite = np.where(np.isfinite(cov), cov, 0.0)
+    if not np.all(np.isfinite(cov)):
+        # A parameter the fit leaves unbounded propagates an unbounded prediction band:
+        # nothing can be judged against it.
+        return {
+            "fraction": fraction,
+            "rows": int(rows.holdout.sum()),
+            "rms": None,
+            "max": None,
+            "within_noise": None,
+            "reason": "cannot judge: a fitted parameter has an unbounded (infinite) uncertainty, so the "
+            "prediction band of the held-out rows is unbounded",
+        }
+    finite = cov
     variance = 1.0 + np.einsum("ij,jk,ik->i", jac, finite, jac) / s2
     unit = "s" if setup.datasets[0].observe == "impacts" else "m"
     sigma = np.sqrt(s2) * (np.ones(len(r_fit)) if scatter_model else setup.per_row(setup.sigmas))

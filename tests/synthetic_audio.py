@@ -145,3 +145,46 @@ def _span(t0, length, rate, n):
     first = int(np.floor(t0 * rate)) + 1
     last = min(n, first + int(length * rate))
     return slice(first, last), np.arange(first, last) / rate - t0
+
+
+def drops_recording(
+    seed: int, drops, *, rate: int = 44100, duration: float | None = None, noise_rms: float = 1e-3
+) -> Recording:
+    """A recording of several drops, each (first bounce time s, release height m,
+    restitution, first click's amplitude full scale): a later drop may start while an
+    earlier ball still bounces. Pink noise and hum as in `recording`; no handling noise
+    (`handling` is empty). `onsets` holds every drop's bounces, in time order."""
+    rng = np.random.default_rng(seed)
+    seqs = []
+    for first, height, e, _ in drops:
+        fall = np.sqrt(2 * height / 9.81)
+        end = duration if duration is not None else first + fall * (2 / (1 - e) + 1) + 0.4
+        seqs.append(bounce_sequence(rng, first_bounce=first, first_interval=2 * fall * e, e=e, end=end - 0.3))
+    if duration is None:
+        duration = max(s[-1] for s in seqs) + 0.5
+    n = int(duration * rate)
+    x = background(rng, n, rate, noise_rms)
+    amps = []
+    for seq, (_, _, _, first_amp) in zip(seqs, drops, strict=True):
+        intervals = np.diff(np.concatenate([seq, [seq[-1] + 0.01]]))
+        amp = first_amp * (intervals / intervals[0]) ** 1.5
+        amps.append(amp)
+        for t0, a in zip(seq, amp, strict=True):
+            where, s = _span(t0, 0.25, rate, n)
+            x[where] += click(rng, s, rate, a)
+    x = np.clip(np.round(np.clip(x, -1, 1) * 32767) / 32767, -1, 1)
+    onsets = np.concatenate(seqs)
+    amp = np.concatenate(amps)
+    order = np.argsort(onsets)
+    audible = (amp > 40 * noise_rms)[order]
+    return Recording(x, rate, onsets[order], audible, np.zeros(len(onsets), bool), np.zeros(0), noise_rms)
+
+
+def gated(rec: Recording, level: float, *, hold: float = 0.0) -> np.ndarray:
+    """`rec`'s samples through a noise gate: exactly 0 except where |sample| exceeded
+    `level` (full scale) within the last `hold` s (at least one sample) — the clicks, their
+    tails while above the level, and with a `hold` the noise after them."""
+    n = max(1, int(round(hold * rec.rate)))
+    loud = (np.abs(rec.samples) > level).astype(float)
+    open_ = np.convolve(loud, np.ones(n), mode="full")[: len(loud)] > 0
+    return np.where(open_, rec.samples, 0.0)

@@ -125,6 +125,22 @@ def test_never_used_with_throw_or_inside_a_transformation(cache_dir):
     assert _entries(cache_dir) == []
 
 
+def test_a_program_with_host_callbacks_is_called_plainly(cache_dir, monkeypatch):
+    """The tsit5 and rk4 modes' programs hold host callbacks even with throw=False
+    (diffrax checks `SaveAt(ts=...)` with `equinox.error_if`), which do not serialize: the
+    cache calls them plainly, without a compile of its own or a try at serializing."""
+    from jax.experimental import serialize_executable
+
+    ball = ju.Ball.table1(2)
+    reference = ju.simulate(ball, ball.paper_initial_state(), T1, solver="tsit5", samples=31, throw=False)
+    tried = []
+    monkeypatch.setattr(serialize_executable, "serialize", lambda *a: tried.append(a) or 1 / 0)
+    enable_executable_cache(cache_dir)
+    again = ju.simulate(ball, ball.paper_initial_state(), T1, solver="tsit5", samples=31, throw=False)
+    _same(again, reference)
+    assert tried == [] and _entries(cache_dir) == []
+
+
 def test_the_key_covers_values_that_decide_the_program(monkeypatch):
     ball = ju.Ball.table1(2)
     args = (ball, np.zeros(2), np.asarray(1.0))
@@ -167,8 +183,18 @@ DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
     [
         (["simulate", "ball", "--solver", "event", "--t1", "0.3"], "_solve_batched"),
         (["identify", DATA, "--starts", "1"], "evaluate_rows"),
+        pytest.param(
+            ["simulate", "ball", "--t1", "0.3"],
+            "_solve_batched",
+            marks=pytest.mark.xfail(
+                strict=True,
+                reason="the default solver (tsit5) holds diffrax's SaveAt(ts) checks, host callbacks that "
+                "neither this cache nor JAX's can keep (jaxunilat/_solver/README.md, 'Warm command-line "
+                "starts'); remove this mark once _simulate traces them away for throw=False",
+            ),
+        ),
     ],
-    ids=["simulate", "identify"],
+    ids=["simulate", "identify", "simulate-default-solver"],
 )
 def test_the_command_lines_second_run_traces_nothing(argv, program, tmp_path):
     """Fresh processes on one cache: a later run prints the same results, and JAX logs no

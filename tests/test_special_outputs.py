@@ -222,7 +222,7 @@ def test_the_executable_cache_never_opens_or_replaces_a_planted_fifo(tmp_path):
     try:
         enable_executable_cache(str(path))
         expected = run()
-        (entry,) = os.listdir(path)
+        (entry,) = [f for f in os.listdir(path) if f.endswith(".jaxexe")]
         os.remove(path / entry)
         os.mkfifo(path / entry)
         enable_executable_cache(str(path))  # a new process: nothing loaded yet

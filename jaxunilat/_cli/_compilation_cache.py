@@ -14,7 +14,17 @@ both on before anything compiles, in a user cache directory:
 - off with `JAXUNILAT_NO_CACHE=1` or the command line's `--no-cache`.
 
 The cache is keyed by JAX on the program, the backend and the compile options, so a
-stale entry is never used; deleting the directory is always safe. The Python API leaves
+stale entry is never used; deleting the directory is always safe.
+
+Trust: a cache directory holds programs that the next command runs, so it must be yours
+alone. The directory and its `executables` folder are created 0700; one that another
+user owns, or that has a group or other write bit, is refused (as ssh refuses such a
+`~/.ssh`), and so is one this process cannot write to (a read-only home). A refused
+directory turns both caches off for the run, which says so in one line on stderr
+(`jaxunilat: warning: ...`, once per process) and otherwise goes on as with `--no-cache`.
+The check protects JAX's own cache too, whose entries are compiled programs although
+not pickles; the executables are besides authenticated (an HMAC under a key of yours:
+`jaxunilat.internal._executables`). The Python API leaves
 JAX's settings alone (`enable_compilation_cache()` is there for notebooks), and the
 test suite runs without it.
 """
@@ -22,8 +32,14 @@ test suite runs without it.
 from __future__ import annotations
 
 import os
+import sys
 
-from ..internal._executables import SUBDIR as EXECUTABLES_SUBDIR, enable_executable_cache
+from ..internal._executables import (
+    SUBDIR as EXECUTABLES_SUBDIR,
+    ExecutableCache,
+    private_directory,
+    set_executable_cache,
+)
 
 #: Environment variables: the directory, and the opt-out.
 CACHE_DIR_ENV = "JAXUNILAT_CACHE_DIR"
@@ -44,25 +60,52 @@ def cache_disabled() -> bool:
     return os.environ.get(NO_CACHE_ENV, "").strip().lower() not in ("", "0", "false", "no")
 
 
+#: The directories already refused in this process (each is reported once).
+_REPORTED: set[str] = set()
+
+
+def _refuse(path: str, why: str) -> None:
+    """Say once per process and directory, in one line on stderr, why `path` is not used."""
+    if path in _REPORTED:
+        return
+    _REPORTED.add(path)
+    if "key file" in why:
+        fix = f"remove {path} (its programs are compiled again), set ${CACHE_DIR_ENV} elsewhere, or pass --no-cache"
+    elif "others can write" in why:
+        fix = f"run 'chmod 700 {path}', set ${CACHE_DIR_ENV} to a directory of your own, or pass --no-cache"
+    else:
+        fix = f"set ${CACHE_DIR_ENV} to a writable directory of your own, or pass --no-cache"
+    print(
+        f"jaxunilat: warning: not using the cache directory {path}: {why}; running without the cache ({fix})",
+        file=sys.stderr,
+    )
+
+
 def enable_compilation_cache(path: str | None = None) -> str | None:
     """Turn on JAX's persistent compilation cache in `path` (default `cache_dir()`), and
     the executable cache (`simulate`, `identify`'s residuals) in its `executables` folder.
 
     Every compiled program is kept (no minimum compile time or size). Returns the
-    directory, or None when `JAXUNILAT_NO_CACHE` is set or the directory cannot be made
-    (a read-only home: the run goes on without a cache).
+    directory, or None when `JAXUNILAT_NO_CACHE` is set, or when the directory or its
+    `executables` folder cannot be made, written to, or trusted (see the module
+    docstring): the run then goes on without a cache, and says why in one line on stderr.
     """
     if cache_disabled():
         return None
     path = cache_dir() if path is None else os.path.abspath(path)
-    try:
-        os.makedirs(path, exist_ok=True)
-    except OSError:
+    why = private_directory(path)
+    if why is not None:
+        _refuse(path, why)
+        return None
+    executables = ExecutableCache(os.path.join(path, EXECUTABLES_SUBDIR))
+    why = executables.prepare()
+    if why is not None:
+        _refuse(executables.path, why)
         return None
     import jax
 
     jax.config.update("jax_compilation_cache_dir", path)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    enable_executable_cache(os.path.join(path, EXECUTABLES_SUBDIR))
+    set_executable_cache(executables)
     return path

@@ -111,6 +111,84 @@ def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
 
+def seed(text: str) -> int:
+    """An argparse type for random seeds: an integer >= 0 (what NumPy's generators take)."""
+    try:
+        value = count(text)
+    except argparse.ArgumentTypeError:
+        value = None
+    if value is None or value < 0:
+        raise argparse.ArgumentTypeError(f"invalid seed {text!r}; valid range is integers >= 0, e.g. 0")
+    return value
+
+
+#: API keywords that have no flag: the hint's words about them are dropped on the command line.
+_NO_FLAG = (
+    re.compile(r"\s*\((or pass )?allow_coarse_dt=True[^)]*\)"),
+    re.compile(r";?\s*pass throw=False to inspect the partial result"),
+)
+
+
+#: Bare messages of libraries (NumPy's random generators) that name no parameter: the
+#: flag whose value causes them, and that flag's valid range.
+_BARE = {"expected non-negative integer": ("seed", "integers >= 0")}
+
+
+def _named(message: str, args) -> str:
+    """`message`, or for a bare library message the flag and value that caused it
+    (e.g. `--seed -5 is out of range; valid range is integers >= 0`)."""
+    found = _BARE.get(message.strip())
+    if found is None or getattr(args, found[0], None) is None:
+        return message
+    name, valid = found
+    return f"{flag_spelling(name)} {getattr(args, name)} is out of range; valid range is {valid}"
+
+
+def command_flags(parser: argparse.ArgumentParser, args) -> set[str]:
+    """The long flags of the (sub)command that `args` ran, e.g. {"--dt", "--solver", ...}."""
+    flags: set[str] = set()
+    current = parser
+    while True:
+        sub = next((a for a in current._actions if isinstance(a, argparse._SubParsersAction)), None)
+        name = None if sub is None else getattr(args, sub.dest, None)
+        if name not in getattr(sub, "choices", {}):
+            break
+        current = sub.choices[name]
+    for action in current._actions:
+        flags.update(o for o in action.option_strings if o.startswith("--"))
+    return flags
+
+
+def cli_spelling(message: str, flags: set[str]) -> str:
+    """`message` (from the API) with its keyword hints spelled as the command's flags.
+
+    `solver='tsit5'` becomes `--solver tsit5`, `heaviside=Exact()` `--heaviside exact` and
+    `use dt <= ...` `use --dt <= ...`, where the command has that flag; hints about
+    keywords without a flag (`allow_coarse_dt`, `throw`) are dropped. A message's leading
+    `name = value` stays: the flag's name without its dashes.
+    """
+
+    def flag(name: str) -> str | None:
+        spelled = "--" + name.replace("_", "-")
+        return spelled if spelled in flags else None
+
+    for pattern in _NO_FLAG:
+        message = pattern.sub("", message)
+
+    def keyword(m):
+        f = flag(m.group(1))
+        return f"{f} {m.group(2).lower()}" if f else m.group(0)
+
+    message = re.sub(r"\b([a-z][a-z0-9_]*)='([\w.-]+)'", keyword, message)
+    message = re.sub(r"\b([a-z][a-z0-9_]*)=([A-Z]\w*)\(\)", keyword, message)
+
+    def bound(m):
+        f = flag(m.group(2))
+        return f"{m.group(1)}{f}{m.group(3)}" if f else m.group(0)
+
+    return re.sub(r"(\buse )([a-z][a-z0-9_]*)( <=| >=| <| >)", bound, message)
+
+
 # -- simulate ball -------------------------------------------------------------------
 
 
@@ -228,6 +306,23 @@ def _contact_starts(contact, x):
     return len(starts), len(starts) - upper, upper
 
 
+def _grid_caveat(ball, args) -> str:
+    """A note for the contact count on the output grid when a contact is shorter than the
+    spacing of the samples (the grid can then miss it: e.g. --kappa 1e12 gives contacts
+    of ~1.5e-7 s against 1e-3 s between samples); empty otherwise."""
+    from .._models._contact import contact_time
+
+    k_r = 0.0 if ball.k_r is None else float(ball.k_r)
+    t_c = float(contact_time(float(ball.kappa), k_r, float(ball.mass)))
+    spacing = args.t1 / (args.samples - 1)
+    if not t_c < spacing:
+        return ""
+    return (
+        f"; a lower bound: a contact lasts ~{t_c:.2g} s, less than the {spacing:.2g} s between samples, "
+        "so the grid can miss it; --solver event locates every contact"
+    )
+
+
 def _failure_message(status, args, ball) -> str:
     from .._solver._settings import DEFAULT_MAX_EVENTS, DEFAULT_MAX_STEPS, failure_hints
     from .._solver._simulate import Status
@@ -331,10 +426,11 @@ def _run_simulate_ball(args) -> int:
 
         table = contact_table(sol, ball)
         n, upper = len(table["t_in"]), int(np.sum(table["wall"] == "upper"))
-        lower, where = n - upper, "located"
+        lower, where, caveat = n - upper, "located", ""
     else:
         n, lower, upper = _contact_starts(sol["contact"], x)
         where = "on the output grid"
+        caveat = _grid_caveat(ball, args)
     x1, v1 = (float(a) for a in np.asarray(sol.y1))
     lines = _describe(args, ball, x0, v0) + [
         (
@@ -342,7 +438,7 @@ def _run_simulate_ball(args) -> int:
             f"{int(sol.num_steps)} (accepted {int(sol.num_accepted_steps)}, rejected {int(sol.num_rejected_steps)})",
         ),
         ("wall time", f"{wall:.3f} s (including JIT compilation, or loading it from the cache)"),
-        ("contacts", f"{n} {where} ({lower} lower, {upper} upper)"),
+        ("contacts", f"{n} {where} ({lower} lower, {upper} upper){caveat}"),
         ("final", f"x(t1) = {x1!r} m, v(t1) = {v1!r} m/s"),
     ]
     try:
@@ -507,6 +603,8 @@ def main(argv: list[str] | None = None) -> int:
     """
     from .._solver._loop_kernels import use_loop_kernels
 
+    # XLA_FLAGS as the user set it, before the command line adds its own option.
+    user_xla_flags = os.environ.get("XLA_FLAGS")
     # Before anything computes: the event mode's loops compile into single kernels.
     use_loop_kernels()
     remove_watcher = _exit_on_interrupt()
@@ -515,8 +613,17 @@ def main(argv: list[str] | None = None) -> int:
     callback_log = logging.getLogger("jax._src.callback")
     callback_level = callback_log.level
     callback_log.setLevel(logging.CRITICAL)
+    parser = args = None
     try:
-        args = build_parser().parse_args(argv)
+        from ._environment import check_environment
+
+        # Before the parser: building it imports modules that may start JAX's backend
+        # (not for help and the version, which compute nothing).
+        words = sys.argv[1:] if argv is None else argv
+        if not {"-h", "--help", "--version"} & set(words):
+            check_environment(user_xla_flags)
+        parser = build_parser()
+        args = parser.parse_args(argv)
         if not args.no_cache:
             from ._compilation_cache import enable_compilation_cache
 
@@ -524,8 +631,11 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args))
     except SystemExit as exc:  # --help, --version
         return exc.code if isinstance(exc.code, int) else EXIT_OK if exc.code is None else EXIT_USAGE
-    except (UsageError, ValueError) as err:
+    except UsageError as err:
         return _fail(str(err), EXIT_USAGE)
+    except ValueError as err:  # from the API: its keyword hints spelled as flags
+        text = str(err) if args is None else cli_spelling(_named(str(err), args), command_flags(parser, args))
+        return _fail(text, EXIT_USAGE)
     except RunError as err:
         return _fail(str(err), EXIT_RUNTIME)
     except RuntimeError as err:  # EquinoxRuntimeError / JaxRuntimeError from the solver
@@ -534,7 +644,10 @@ def main(argv: list[str] | None = None) -> int:
         # (equinox prefixes its class name; JAX puts the traced stack first), never a
         # traceback's file path.
         ours = [m.group(0) for m in re.finditer(r"\bjaxunilat\.\w+: [^\n]*", text)]
-        return _fail((ours or text.splitlines() or [type(err).__name__])[0], EXIT_RUNTIME)
+        line = (ours or text.splitlines() or [type(err).__name__])[0]
+        if args is not None:
+            line = cli_spelling(line, command_flags(parser, args))
+        return _fail(line, EXIT_RUNTIME)
     except KeyboardInterrupt:
         return _fail("interrupted", EXIT_INTERRUPTED)
     finally:

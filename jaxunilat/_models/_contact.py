@@ -25,10 +25,11 @@ import abc
 import math
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike
 
-from ..internal._validate import check_range, real_number
+from ..internal._validate import InputTypeError, check_range, real_number
 from ._heaviside import AbstractHeaviside, Exact
 
 
@@ -147,36 +148,86 @@ class HuntCrossley(AbstractContactLaw):
         return jnp.where(inside, kappa * safe**n1 / n1, jnp.zeros_like(pen))
 
 
+#: The valid ranges of the helpers' parameters (`check_range` keywords).
+_RANGES = {
+    "kappa": dict(lo=0.0, lo_open=True, unit="N/m"),
+    "k_r": dict(lo=0.0, unit="N*s/m"),
+    "mass": dict(lo=0.0, lo_open=True, unit="kg"),
+    "e": dict(lo=0.0, hi=1.0, lo_open=True),
+    "t_c": dict(lo=0.0, lo_open=True, unit="s"),
+    "speed": dict(lo=0.0, lo_open=True, unit="m/s"),
+    "exponent": dict(lo=0.0, lo_open=True),
+}
+
+
 def _real(**values) -> tuple[Array, ...]:
     """The values as JAX arrays, after `real_number` checks that name each one."""
     return tuple(jnp.asarray(real_number(name, value)) for name, value in values.items())
 
 
+def _checked(**values) -> tuple[tuple[Array, ...], Array | bool]:
+    """The helpers' input checks, one policy for all (see `damping_ratio`): concrete
+    values out of `_RANGES` raise `ValueError` naming the parameter, the value and the
+    range; traced ones give `valid`, false where any is out of range (or not finite),
+    which the helper turns into NaN. Returns (the values as arrays, valid)."""
+    from ..internal._validate import _within, is_concrete
+
+    arrays = _real(**values)
+    valid = True
+    for (name, value), array in zip(values.items(), arrays, strict=True):
+        kw = _RANGES[name]
+        check_range(name, value, **kw)
+        if not is_concrete(array):
+            inside = _within(
+                array, kw.get("lo"), kw.get("hi"), kw.get("lo_open", False), kw.get("hi_open", False)
+            )
+            valid = valid & jnp.isfinite(array) & inside
+    return arrays, valid
+
+
+def _nan_unless(valid, result):
+    """`result` where `valid`, else NaN (a plain `result` when every input was concrete)."""
+    if valid is True:
+        return result
+    return jnp.where(valid, result, jnp.nan)
+
+
 def damping_ratio(kappa: ArrayLike, k_r: ArrayLike, mass: ArrayLike) -> Array:
-    """ζ = k_r / (2√(κ m)), dimensionless. κ in N/m, k_r in N·s/m, m in kg."""
-    kappa, k_r, mass = _real(kappa=kappa, k_r=k_r, mass=mass)
-    return k_r / (2.0 * jnp.sqrt(kappa * mass))
+    """ζ = k_r / (2√(κ m)), dimensionless. κ in N/m (> 0), k_r in N·s/m (>= 0), m in kg (> 0).
+
+    Out-of-range inputs, the policy of every contact helper (`damping_ratio`,
+    `restitution`, `contact_time`, `parameters_from_restitution`,
+    `hunt_crossley_contact_time`): concrete values raise `ValueError` naming the
+    parameter, the value and the valid range; traced values (under `jax.jit`,
+    `jax.vmap`, `jax.grad`) give NaN in the result, which no valid input gives.
+    """
+    (kappa, k_r, mass), valid = _checked(kappa=kappa, k_r=k_r, mass=mass)
+    return _nan_unless(valid, k_r / (2.0 * jnp.sqrt(kappa * mass)))
 
 
 def restitution(kappa: ArrayLike, k_r: ArrayLike, mass: ArrayLike) -> Array:
     """Kelvin–Voigt restitution e = exp(−πζ/√(1 − ζ²)) for ζ < 1, else 0.
 
-    **Arguments:** `kappa` (N/m), `k_r` (N·s/m), `mass` (kg).
+    **Arguments:** `kappa` (N/m, > 0), `k_r` (N·s/m, >= 0), `mass` (kg, > 0); out of
+    range: `ValueError`, or NaN when traced (see `damping_ratio`).
 
     **Returns:** e ∈ [0, 1], the ratio |v_out/v_in| for an impact without gravity.
     """
     zeta = damping_ratio(kappa, k_r, mass)
     under = zeta < 1
     safe = jnp.where(under, zeta, 0.5)
-    return jnp.where(under, jnp.exp(-jnp.pi * safe / jnp.sqrt(1 - safe**2)), 0.0)
+    e = jnp.where(under, jnp.exp(-jnp.pi * safe / jnp.sqrt(1 - safe**2)), 0.0)
+    return jnp.where(jnp.isnan(zeta), jnp.nan, e)
 
 
 def contact_time(kappa: ArrayLike, k_r: ArrayLike, mass: ArrayLike) -> Array:
     """Kelvin–Voigt contact time t_c = π/ω_d, s, for ζ < 1 (inf otherwise).
 
-    **Arguments:** `kappa` (N/m), `k_r` (N·s/m), `mass` (kg).
+    **Arguments:** `kappa` (N/m, > 0), `k_r` (N·s/m, >= 0), `mass` (kg, > 0); out of
+    range: `ValueError`, or NaN when traced (see `damping_ratio`).
     """
-    return rk4_step_limit(*_real(kappa=kappa, k_r=k_r, mass=mass))[1]
+    (kappa, k_r, mass), valid = _checked(kappa=kappa, k_r=k_r, mass=mass)
+    return _nan_unless(valid, rk4_step_limit(kappa, k_r, mass)[1])
 
 
 #: `simulate(solver="rk4")` takes at least this many steps per Kelvin–Voigt contact time.
@@ -251,13 +302,12 @@ def parameters_from_restitution(e: ArrayLike, t_c: ArrayLike, mass: ArrayLike) -
 
     **Returns:** `(kappa, k_r)` in N/m and N·s/m, with κ = m(π² + ln²e)/t_c² and
     k_r = −2 m ln e / t_c.
+    Out of range: `ValueError`, or NaN in both results when traced (see `damping_ratio`).
     """
-    check_range("e", e, lo=0.0, hi=1.0, lo_open=True)
-    check_range("t_c", t_c, lo=0.0, lo_open=True, unit="s")
-    check_range("mass", mass, lo=0.0, lo_open=True, unit="kg")
-    e, t_c, mass = jnp.asarray(e), jnp.asarray(t_c), jnp.asarray(mass)
+    (e, t_c, mass), valid = _checked(e=e, t_c=t_c, mass=mass)
     le = jnp.log(e)
-    return mass * (jnp.pi**2 + le**2) / t_c**2, -2.0 * mass * le / t_c
+    kappa, k_r = mass * (jnp.pi**2 + le**2) / t_c**2, -2.0 * mass * le / t_c
+    return _nan_unless(valid, kappa), _nan_unless(valid, k_r)
 
 
 def hunt_crossley_contact_time(kappa: float, mass: float, speed: float, exponent: float = 1.5) -> float:
@@ -265,11 +315,26 @@ def hunt_crossley_contact_time(kappa: float, mass: float, speed: float, exponent
 
     t_c = 2 (δ_max / v) √π Γ(1 + 1/(n+1)) / Γ(1/2 + 1/(n+1)),
     δ_max = ((n + 1) m v² / (2κ))^(1/(n+1)).
+
+    **Arguments:** `kappa` (N/mⁿ, > 0), `mass` (kg, > 0), `speed` (impact speed, m/s,
+    > 0), `exponent` n (> 0). Out of range: `ValueError`, or NaN when traced (see
+    `damping_ratio`).
     """
+    if isinstance(exponent, jax.core.Tracer):
+        raise InputTypeError("exponent is traced; it must be a concrete number (n > 0)")
+    values = dict(kappa=kappa, mass=mass, speed=speed, exponent=exponent)
+    if all(isinstance(v, (int, float)) for v in values.values()):
+        # Plain numbers: checked and computed on the host (identify calls this on import,
+        # before JAX may start its backend).
+        for name, value in values.items():
+            check_range(name, real_number(name, value), **_RANGES[name])
+        valid = True
+    else:
+        _, valid = _checked(**values)
     n1 = exponent + 1.0
     dmax = (n1 * mass * speed**2 / (2.0 * kappa)) ** (1.0 / n1)
     integral = math.sqrt(math.pi) * math.gamma(1.0 + 1.0 / n1) / math.gamma(0.5 + 1.0 / n1)
-    return 2.0 * dmax / speed * integral
+    return _nan_unless(valid, 2.0 * dmax / speed * integral)
 
 
 def clearance_force(
@@ -293,11 +358,13 @@ def clearance_force(
 
     **Returns:** P in N.
     """
-    x = jnp.asarray(x)
+    x = jnp.asarray(real_number("x", x, unit="m"))
     p = jnp.zeros_like(x, dtype=jnp.result_type(x, float))
     if a is not None:
+        a, kappa1 = real_number("a", a, unit="m"), real_number("kappa1", kappa1, unit="N/m")
         p = p - jnp.asarray(kappa1) * heaviside.ramp(a - x)
     if b is not None:
+        b, kappa2 = real_number("b", b, unit="m"), real_number("kappa2", kappa2, unit="N/m")
         p = p + jnp.asarray(kappa2) * heaviside.ramp(x - b)
     return p
 

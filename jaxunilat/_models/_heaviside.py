@@ -13,6 +13,7 @@ itself is only 3.9 mm).
 from __future__ import annotations
 
 import abc
+import sys
 import warnings
 
 import equinox as eqx
@@ -63,9 +64,35 @@ def _warn_if_differentiated(z):
     return z
 
 
+#: Top-level modules whose frames are not the user's call site (`_user_call`).
+_LIBRARIES = frozenset(
+    ("jax", "jaxlib", "equinox", "diffrax", "lineax", "optimistix", "jaxtyping", "jaxunilat")
+    + ("functools", "contextlib", "typing", "weakref")
+)
+#: (frame id, instruction, line) of the user call last warned about.
+_LAST_WARNED: list = [None]
+
+
+def _user_call():
+    """(stacklevel, key) of the innermost frame outside JAX, its libraries and jaxunilat:
+    the user's call that differentiates (e.g. the line `jax.grad(loss)(kappa)`)."""
+    frame, level = sys._getframe(2), 2  # the jvp rule's caller: stacklevel 2 from the rule
+    while frame is not None and frame.f_globals.get("__name__", "").split(".")[0] in _LIBRARIES:
+        frame, level = frame.f_back, level + 1
+    if frame is None:
+        return 2, None
+    return level, (id(frame), frame.f_lasti, frame.f_lineno)
+
+
 @_warn_if_differentiated.defjvp
 def _warn_if_differentiated_jvp(primals, tangents):
-    warnings.warn(_EXACT_GRADIENT, ExactHeavisideGradientWarning, stacklevel=2)
+    # JAX traces the rule once per use of the switch in a traced program (both walls, the
+    # solver's first and later steps): one warning per differentiating call, attributed
+    # to the user's line, whatever the warnings filter.
+    level, key = _user_call()
+    if key is None or key != _LAST_WARNED[0]:
+        _LAST_WARNED[0] = key
+        warnings.warn(_EXACT_GRADIENT, ExactHeavisideGradientWarning, stacklevel=level)
     return primals[0], tangents[0]
 
 

@@ -32,8 +32,26 @@ def _events(sol_or_events) -> EventRecord:
     return events
 
 
+def _meaningful(sol_or_events) -> Array | bool:
+    """False when `sol_or_events` is a `Solution` whose inputs failed the checks
+    (`Status.INVALID_INPUT`, e.g. a traced negative stiffness under `jax.jit` with
+    `throw=False`): its events are then meaningless, and the observations are NaN."""
+    status = getattr(sol_or_events, "status", None)
+    if status is None:
+        return True
+    from ._simulate import Status
+
+    return jnp.asarray(status) != Status.INVALID_INPUT
+
+
+def _check_count(n) -> None:
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+        raise ValueError(f"n = {n!r} is out of range; valid range is integers >= 0 (a static count)")
+
+
 def _select(events: EventRecord, keep: Array, n: int) -> tuple[Array, Array]:
     """Indices of the first `n` events where `keep`, and which of them exist."""
+    _check_count(n)
     keep = keep & (jnp.arange(events.t.shape[-1]) < events.count)
     (idx,) = jnp.nonzero(keep, size=n, fill_value=0)
     valid = jnp.arange(n) < jnp.sum(keep)
@@ -52,12 +70,17 @@ def impact_times(sol_or_events, n: int, *, wall: int | None = None) -> Array:
     - `sol_or_events`: a `Solution` of `solver="event"` (or its `EventRecord`).
     - `n`: how many (static).
     - `wall`: only contacts with this wall index (lower first), or all.
+
+    All NaN for a `Solution` with `Status.INVALID_INPUT` (inputs that failed the
+    run-time checks under `jax.jit`/`jax.vmap` with `throw=False`): such a run's
+    events mean nothing. Check `sol.status` for the reason.
     """
     ev = _events(sol_or_events)
     keep = ev.kind == ENTRY
     if wall is not None:
         keep = keep & (ev.wall == wall)
     idx, valid = _select(ev, keep, n)
+    valid = valid & _meaningful(sol_or_events)
     return jnp.where(valid, ev.t[idx], jnp.nan)
 
 
@@ -65,10 +88,12 @@ def apexes(sol_or_events, n: int, *, coordinate: int = 0) -> tuple[Array, Array]
     """The first `n` apexes of free flight (roots of the observable, v for the ball).
 
     **Returns:** `(times [s], heights)`, where heights are state component
-    `coordinate` (x, m, for the ball) at the apex; NaN where fewer happened.
+    `coordinate` (x, m, for the ball) at the apex; NaN where fewer happened, and all
+    NaN for a `Solution` with `Status.INVALID_INPUT` (as `impact_times`).
     """
     ev = _events(sol_or_events)
     idx, valid = _select(ev, (ev.kind == EXTREMUM) & (ev.wall == -1), n)
+    valid = valid & _meaningful(sol_or_events)
     return jnp.where(valid, ev.t[idx], jnp.nan), jnp.where(valid, ev.y[idx, coordinate], jnp.nan)
 
 

@@ -254,6 +254,17 @@ def _hold_rest(model, sol, ts, t1, save_fn, ys, y1):
     return ys, y1, (sol.result == dfx.RESULTS.successful) | held
 
 
+def _stand_in(checks, t0, t1, ts, dt):
+    """(t0, t1, ts, dt) for diffrax: the given ones when every input check passes, else
+    t0 = 0 s, t1 = 1 s, every ts at t0 and dt = 1 s (one step)."""
+    valid = jnp.all(jnp.stack([ok for _, ok in checks]))
+    t0_run = jnp.where(valid, t0, 0.0)
+    t1_run = jnp.where(valid, t1, 1.0)
+    ts_run = jnp.where(valid, ts, t0_run)  # not a constant array: nothing for XLA to fold
+    dt_run = None if dt is None else jnp.where(valid, dt, 1.0)
+    return t0_run, t1_run, ts_run, dt_run
+
+
 def _solve_impl(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[str, ...], throw: bool):
     _TRACES["simulate"] += 1
     checks = _input_checks(model, y0, t0, t1, ts, settings)
@@ -272,16 +283,21 @@ def _solve_impl(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[
     def save_fn(t, y, args):
         return {name: args.output(name, t, y) for name in outputs}
 
-    saveat = dfx.SaveAt(subs=[dfx.SubSaveAt(ts=ts, fn=save_fn), dfx.SubSaveAt(t1=True)])
+    # An invalid traced input is reported as Status.INVALID_INPUT by `_finish`; diffrax
+    # gets a harmless stand-in (span [0, 1] s, one step, ts on it) instead, whose own
+    # checks (decreasing or outlying ts, a step of the wrong sign) would otherwise raise
+    # through a host callback even with throw=False. Valid inputs pass unchanged.
+    t0_run, t1_run, ts_run, dt_run = _stand_in(checks, t0, t1, ts, settings.dt)
+    saveat = dfx.SaveAt(subs=[dfx.SubSaveAt(ts=ts_run, fn=save_fn), dfx.SubSaveAt(t1=True)])
     # The adaptive solver only: RK4's fixed step is the user's (a diverging run must
     # fail, not pass through a state that looks at rest).
     rests = settings.method == "tsit5" and _can_rest(model)
     sol = dfx.diffeqsolve(
         dfx.ODETerm(lambda t, y, args: args.vector_field(t, y)),
         settings.diffrax_solver(),
-        t0,
-        t1,
-        settings.dt,
+        t0_run,
+        t1_run,
+        dt_run,
         y0,
         args=model,
         saveat=saveat,
@@ -294,7 +310,7 @@ def _solve_impl(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[
     ys, y1 = sol.ys[0], sol.ys[1][0]
     ok = sol.result == dfx.RESULTS.successful
     if rests:
-        ys, y1, ok = _hold_rest(model, sol, ts, t1, save_fn, ys, y1)
+        ys, y1, ok = _hold_rest(model, sol, ts_run, t1_run, save_fn, ys, y1)
     finite = jnp.all(jnp.isfinite(y1))
     for value in ys.values():
         finite = finite & jnp.all(jnp.isfinite(value))

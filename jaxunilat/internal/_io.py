@@ -317,6 +317,11 @@ def _column(name: str, column) -> np.ndarray:
         if any(("," in v or "\n" in v or "\r" in v) for v in a):
             raise ValueError(f"column {name!r}: text entries must not contain commas or line breaks")
         return a
+    if a.dtype.kind not in "fiub":
+        from ._validate import InputTypeError
+
+        what = "complex" if a.dtype.kind == "c" else f"of dtype {a.dtype}"
+        raise InputTypeError(f"column {name!r} is {what}; valid columns hold real numbers (float64) or text")
     return np.asarray(a, dtype=float).ravel()
 
 

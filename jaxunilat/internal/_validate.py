@@ -70,14 +70,30 @@ def _short(value) -> str:
 
 
 def float_field(name: str, unit: str = "", *, optional: bool = False):
-    """An equinox field converter to a float64 array whose type errors name `name`
-    (`optional`: `None` passes through, e.g. an absent wall or damping term)."""
+    """An equinox field converter to a float64 scalar whose errors name `name`
+    (`optional`: `None` passes through, e.g. an absent wall or damping term).
+
+    A value with more than one entry (a list, an array of shape (2,), also traced) is
+    refused with a `ValueError`: a model holds one value per parameter, and a batch of
+    models is made with `jax.vmap` or `jaxunilat.sweep` over scalar parameters (their
+    rows are scalars there). A shape-(1,) or (1, 1) value is taken as its one entry.
+    """
     import jax.numpy as jnp
 
     def convert(value):
         if value is None and optional:
             return None
-        return jnp.asarray(real_number(name, value, unit=unit), dtype=float)
+        value = jnp.asarray(real_number(name, value, unit=unit), dtype=float)
+        if value.ndim:
+            if value.size != 1:
+                shown = _short(np.asarray(value).tolist()) if is_concrete(value) else "a traced array"
+                suffix = f" in {unit}" if unit else ""
+                raise ValueError(
+                    f"{name} = {shown} has shape {tuple(value.shape)}; valid is one real number{suffix} "
+                    "(shape ()); for a batch of models use jax.vmap or jaxunilat.sweep over scalar values"
+                )
+            value = value.reshape(())
+        return value
 
     convert.__name__ = f"float_field_{name}"
     return convert
