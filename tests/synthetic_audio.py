@@ -188,3 +188,14 @@ def gated(rec: Recording, level: float, *, hold: float = 0.0) -> np.ndarray:
     loud = (np.abs(rec.samples) > level).astype(float)
     open_ = np.convolve(loud, np.ones(n), mode="full")[: len(loud)] > 0
     return np.where(open_, rec.samples, 0.0)
+
+
+def write_wav(path, x, rate: float) -> None:
+    """Write samples `x` (full scale = 1, clipped) as a 16-bit mono PCM WAV at `rate` Hz."""
+    import wave
+
+    with wave.open(str(path), "wb") as w:
+        w.setnchannels(1)
+        w.setsampwidth(2)
+        w.setframerate(int(rate))
+        w.writeframes(np.clip(np.round(np.asarray(x) * 32767), -32768, 32767).astype("<i2").tobytes())

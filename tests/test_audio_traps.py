@@ -1,11 +1,9 @@
 """Audio traps from a hostile probe: a noise-gated recording, several drops in one
 recording, a loud click at the start. Recordings: tests/synthetic_audio.py."""
 
-import wave
-
 import numpy as np
 import pytest
-from synthetic_audio import click, drops_recording, gated, recording
+from synthetic_audio import click, drops_recording, gated, recording, write_wav
 
 from identify import ImplausibleRecording, detect_onsets, import_wav
 
@@ -17,11 +15,7 @@ def _match(found, truth):
 
 
 def _write(path, x, rate):
-    with wave.open(str(path), "wb") as w:
-        w.setnchannels(1)
-        w.setsampwidth(2)
-        w.setframerate(rate)
-        w.writeframes(np.clip(np.round(x * 32767), -32768, 32767).astype("<i2").tobytes())
+    write_wav(path, x, rate)
 
 
 @pytest.mark.parametrize("seed", [2, 3, 4, 10])

@@ -11,7 +11,7 @@ detector, while a detector that times the peak, or a ringing re-peak, is off by 
 
 import numpy as np
 import pytest
-from synthetic_audio import recording
+from synthetic_audio import recording, write_wav
 
 from identify import ImplausibleRecording, detect_onsets, import_wav
 from identify._import_audio import rise_ratio, select_chain
@@ -98,13 +98,7 @@ def test_loud_click_at_the_start_is_not_the_first_bounce():
 
 
 def _write(path, x, rate):
-    import wave
-
-    with wave.open(str(path), "wb") as w:
-        w.setnchannels(1)
-        w.setsampwidth(2)
-        w.setframerate(rate)
-        w.writeframes(np.clip(np.round(x * 32767), -32768, 32767).astype("<i2").tobytes())
+    write_wav(path, x, rate)
 
 
 def test_several_drops_refused_and_forced(tmp_path):
