@@ -53,15 +53,15 @@ def test_pingpong_matches_the_authors_bounce_times():
     # ... and the onsets after the author's last pick continue the same ball's chain.
     chain = ratio_chain(found)
     assert not chain.broken.any() and chain.missed == 0
-    assert 0.93 <= chain.restitution <= 0.96  # README: 0.9468 from a full fit
+    assert 0.93 <= chain.restitution <= 0.96  # the recordings' reference: 0.9468 from a full fit
 
 
 @pytest.mark.parametrize(
     "name, count, e_band",
     [
-        # README: about 14 clear bounces; e about 0.8-0.88 (interval ratio 0.81 -> 0.90).
+        # the recordings' reference: about 14 clear bounces; e about 0.8-0.88 (interval ratio 0.81 -> 0.90).
         ("mth337_basketball.wav", (12, 15), (0.81, 0.91)),
-        # README: about 15 bounces; e about 0.9 (scratch fit 0.909).
+        # the recordings' reference: about 15 bounces; e about 0.9 (scratch fit 0.909).
         ("mth337_rubberball.wav", (13, 16), (0.86, 0.95)),
     ],
 )

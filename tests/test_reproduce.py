@@ -23,7 +23,7 @@ def test_reproduce_quick(tmp_path, capsys):
     assert "## Table 2: the coupling, literal constants, reading paper" in summary
     claims = [line for line in text.splitlines() if line.startswith(("PASS", "FAIL"))]
     assert len(claims) == 10
-    # The verdicts follow from the physics (README.md, "The rolling-mill coupling and
+    # The verdicts follow from the physics (jaxunilat/README.md, "The rolling-mill coupling and
     # `reproduce`"): the ball's three claims hold (the upper-contact one only in its window);
     # the stiff coupling reproduces all three trends; the literal constants fail two of them.
 

@@ -5,7 +5,7 @@ default, `JAXUNILAT_STRESS_N` to change); the default run checks a quick subset 
 shares one compiled structure per mode. Both write the summary table (configurations,
 passes, clear errors, silent failures) to `JAXUNILAT_STRESS_TABLE` if set, else under
 pytest's tmp_path, and print it. The accuracy contract is in `stress_configs`'s docstring
-and in the README's "Reliability and limits".
+and in jaxunilat/README.md.
 """
 
 import json

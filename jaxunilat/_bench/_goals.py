@@ -1,6 +1,6 @@
 """The benchmark's goals P1–P5 and P7–P9: values from the measured sections, notes on missed ones.
 
-The goals (targets in `GOALS`, listed in README.md, "Performance"): P1, P2 ratios
+The goals (targets in `GOALS`): P1, P2 ratios
 against the best peer in the same run; P3 trajectories per second (and the ratio
 against a scipy loop); P4 gradient / forward; P5 compile time. P7–P9 are measured on
 code as users write it (`_user.py`): P7 plain `jax.jit(jax.vmap(f))` against rows one
