@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 
 import numpy as np
 
@@ -39,12 +40,14 @@ class ClosedForm:
     - `count`: how many bounces the median is over.
     - `first`: bounce 1's e computed from the stated release height x0 (None where the
       file is not a drop from rest).
+    - `launch`: the speed leaving the first recorded bounce, m/s (from the first flight).
     """
 
     restitution: float
     spread: float
     count: int
     first: float | None
+    launch: float = math.nan
 
     @property
     def standard_error(self) -> float:
@@ -82,7 +85,8 @@ def closed_form(d) -> ClosedForm | None:
     first = None
     if drop is not None and len(b.index) and b.index[0] == 0 and spans[0] == 1:
         first = float(b.restitution[0])
-    return ClosedForm(restitution=median, spread=spread, count=len(later), first=first)
+    launch = float(b.rebound_speed[0]) if len(index) and index[0] == 0 else math.nan
+    return ClosedForm(restitution=median, spread=spread, count=len(later), first=first, launch=launch)
 
 
 def _tolerance(law: str, form: ClosedForm) -> float:
@@ -91,8 +95,6 @@ def _tolerance(law: str, form: ClosedForm) -> float:
 
 
 def _name(d, f: int) -> str:
-    import os
-
     return os.path.basename(d.path) if d.path else f"data set {f + 1}"
 
 
@@ -151,13 +153,7 @@ def _file_restitution(result, f: int, n_files: int) -> float | None:
 
 def _implied_height(d, form: ClosedForm) -> float:
     """The release height (m) whose first impact speed, times e, launches the first flight."""
-    from ._restitution import bounce_restitution
-
-    b = bounce_restitution(
-        np.asarray(d.t, float), drag=float(d.drag), gravity=float(d.gravity), drop_height=float(d.x0)
-    )
-    launch = float(np.asarray(b.rebound_speed)[np.asarray(b.index) == 0][0])
-    w = launch / form.restitution  # the first impact speed
+    w = form.launch / form.restitution  # the first impact speed
     k, g = float(d.drag), float(d.gravity)
     if k > 0 and k * w < 1:
         return -math.log(1.0 - (k * w) ** 2) / (2.0 * g * k * k)
