@@ -183,16 +183,7 @@ DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
     [
         (["simulate", "ball", "--solver", "event", "--t1", "0.3"], "_solve_batched"),
         (["identify", DATA, "--starts", "1"], "evaluate_rows"),
-        pytest.param(
-            ["simulate", "ball", "--t1", "0.3"],
-            "_solve_batched",
-            marks=pytest.mark.xfail(
-                strict=True,
-                reason="the default solver (tsit5) holds diffrax's SaveAt(ts) checks, host callbacks that "
-                "neither this cache nor JAX's can keep (jaxunilat/_solver/README.md, 'Warm command-line "
-                "starts'); remove this mark once _simulate traces them away for throw=False",
-            ),
-        ),
+        (["simulate", "ball", "--t1", "0.3"], "_solve_batched"),
     ],
     ids=["simulate", "identify", "simulate-default-solver"],
 )

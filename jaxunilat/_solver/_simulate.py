@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import enum
 import functools
 import math
 import re
+import sys
+import threading
 import warnings
 from collections import Counter
 
@@ -265,6 +268,58 @@ def _stand_in(checks, t0, t1, ts, dt):
     return t0_run, t1_run, ts_run, dt_run
 
 
+_CHECKS_LOCK = threading.RLock()
+
+
+@contextlib.contextmanager
+def _diffrax_checks_off():
+    """Trace `diffeqsolve` without its run-time input checks (equinox's `error_if`).
+
+    `_solve_impl` checks every input itself and hands diffrax a valid stand-in when one
+    fails (`_stand_in`), and it calls diffrax with `throw=False`. diffrax still guards
+    `SaveAt(ts)` and `dt0` with `eqx.error_if`, which compiles to a Python host callback
+    that can never fire here, yet makes the program impossible to serialise, so the
+    command line's executable cache could not keep the tsit5 and rk4 modes.
+
+    equinox reads its `EQX_ON_ERROR` setting (documented: raise, nan, breakpoint, off)
+    from the environment once, at import, into the module `equinox._errors`; this
+    switches that value to "off" while the solve is traced, and only when it is the
+    default "raise" (a user debugging with `EQX_ON_ERROR=breakpoint` keeps it). An
+    equinox that keeps the setting elsewhere is left alone: the checks then stay, and
+    the cache calls such a program plainly (`internal._executables`).
+    """
+    module = sys.modules.get("equinox._errors")
+    if getattr(module, "EQX_ON_ERROR", None) != "raise":
+        yield
+        return
+    with _CHECKS_LOCK:
+        module.EQX_ON_ERROR = "off"
+        try:
+            yield
+        finally:
+            module.EQX_ON_ERROR = "raise"
+
+
+def _diffeqsolve(model, settings, t0, t1, dt, y0, saveat, rests, t_end):
+    """diffrax's solve of the tsit5 and rk4 modes, with `throw=False` (the status is
+    read from `result`)."""
+    return dfx.diffeqsolve(
+        dfx.ODETerm(lambda t, y, args: args.vector_field(t, y)),
+        settings.diffrax_solver(),
+        t0,
+        t1,
+        dt,
+        y0,
+        args=model,
+        saveat=saveat,
+        stepsize_controller=settings.controller(),
+        adjoint=settings.adjoint(),
+        max_steps=settings.max_steps,
+        event=_rest_event(model, settings, t_end) if rests else None,
+        throw=False,
+    )
+
+
 def _solve_impl(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[str, ...], throw: bool):
     _TRACES["simulate"] += 1
     checks = _input_checks(model, y0, t0, t1, ts, settings)
@@ -292,21 +347,8 @@ def _solve_impl(model, y0, t0, t1, ts, settings: SolverSettings, outputs: tuple[
     # The adaptive solver only: RK4's fixed step is the user's (a diverging run must
     # fail, not pass through a state that looks at rest).
     rests = settings.method == "tsit5" and _can_rest(model)
-    sol = dfx.diffeqsolve(
-        dfx.ODETerm(lambda t, y, args: args.vector_field(t, y)),
-        settings.diffrax_solver(),
-        t0_run,
-        t1_run,
-        dt_run,
-        y0,
-        args=model,
-        saveat=saveat,
-        stepsize_controller=settings.controller(),
-        adjoint=settings.adjoint(),
-        max_steps=settings.max_steps,
-        event=_rest_event(model, settings, t1) if rests else None,
-        throw=False,
-    )
+    with _diffrax_checks_off():
+        sol = _diffeqsolve(model, settings, t0_run, t1_run, dt_run, y0, saveat, rests, t1)
     ys, y1 = sol.ys[0], sol.ys[1][0]
     ok = sol.result == dfx.RESULTS.successful
     if rests:

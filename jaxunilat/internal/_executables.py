@@ -43,8 +43,8 @@ why; the command line prints it once).
 A call whose key cannot be written faithfully (a repr with an address in it) is not
 cached. Any failure to read, load or write an entry falls back to the plain compiled
 call, and an unreadable entry is deleted. Only programs with no host callbacks can be
-serialized: `simulate` uses the cache for `throw=False` only, and a program that has
-some anyway (diffrax's checks of `SaveAt(ts=...)`, in the tsit5 and rk4 modes) is
+serialized: `simulate` uses the cache for `throw=False` only (and traces diffrax's own
+input checks away, having made them itself), and a program that has some anyway is
 called plainly, so that JAX's persistent cache keeps its compile. At most `max_entries`
 files are kept (the least recently used go first); deleting the directory is always
 safe.
@@ -440,7 +440,7 @@ def _compile_fresh(jitted: Callable, args: tuple, static: tuple):
     docstring). The compile has a key of its own there, and nothing is written under it
     (the minimum compile time for a write is set to infinity meanwhile). None where XLA
     refuses the option (a release without it), and where the program has host callbacks
-    (they do not serialize; diffrax's checks of `SaveAt(ts=...)` are some): the caller
+    (they do not serialize): the caller
     then calls `jitted` plainly, so that JAX's persistent cache keeps the compile (the
     call reuses this lowering), and keeps nothing itself."""
     lowered = jitted.lower(*args, *static)
