@@ -10,8 +10,8 @@ boundary:
    with `autodiff="forward"` a plain loop, for `jax.jvp` and `jax.jacfwd`).
    Each step uses diffrax's Butcher tableau with the stages unrolled, and the pair's
    continuous extension (diffrax's interpolant, as a polynomial in θ collected once
-   per step: `_dense`); step-size control is an integral controller on the embedded
-   error estimate.
+   per step: `_dense`); step-size control is a PI controller on the embedded
+   error estimate (`_event_pieces._step_factor`).
 2. After each accepted step the switching functions g_i (signed distances into the
    walls) are checked on a sub-grid of the step's dense interpolant, and at the roots
    of the model's observable (v for the ball: apexes and deepest points). Checking at
@@ -274,4 +274,7 @@ def _advance(state: State, piece: Piece) -> State:
         direction=jnp.where(accept, end.direction, state.direction),
         dt_region=dt_region,
         dt=jnp.where(event, first_visit, piece.dt_new),
+        # The PI controller's memory: the last accepted step's error norm (a flight or
+        # a rest piece passes it on).
+        err_prev=jnp.where(accept, piece.err, state.err_prev),
     )

@@ -104,6 +104,8 @@ class State(eqx.Module):
     direction: Array  # the observable's sign in the current piece (±1)
     # -- step-size controller -------------------------------------------------------
     dt: Array  # the next trial step, s
+    # The last accepted step's error norm (at least `ERR_FLOOR`), for the PI controller.
+    err_prev: Array
     # The last accepted step in each kind of region (free, then in contact with switch
     # i), s: the first step after a crossing starts from the previous visit's.
     dt_region: Array
@@ -166,6 +168,7 @@ class Piece(eqx.Module):
     accept: Array
     fail: Array  # non-finite, or a rejected step far below the rounding of t
     dt_new: Array  # the next trial step, s
+    err: Array  # the step's error norm (1: at the tolerance), floored at `ERR_FLOOR`
     h_used: Array  # the step to remember for this kind of region, s
     f_max: Array  # the peak |contact force| in the piece, N
 
@@ -186,6 +189,7 @@ class Trial(eqx.Module):
     # -- the step-size controller's verdict -------------------------------------------
     finite: Array
     accept: Array
+    err: Array  # the error norm (1: at the tolerance), floored at `ERR_FLOOR`
     dt_new: Array  # the next trial step, s
     # -- detection on the sub-grid ----------------------------------------------------
     sub_t: Array  # s
@@ -232,6 +236,7 @@ def initial_state(problem: Problem, y0, dt0) -> State:
         mask=mask0,
         direction=direction0,
         dt=jnp.asarray(dt0, dtype),
+        err_prev=jnp.asarray(1.0, dtype),
         dt_region=jnp.full(n_sw + 1, jnp.inf, dtype),
         resting=resting0,
         rest_time=jnp.where(proven0, t0, jnp.inf).astype(dtype),
