@@ -7,6 +7,11 @@ Two ways to sweep: vmapped chunks of rows (`batch_size` `CHUNK`), and rows one b
 `sweep` shards the rows over every core. `python -m jaxunilat._bench._scale N REPEATS
 [--one-by-one]` prints one JSON object with the sharded sweep's throughput on the first
 device alone and on all visible devices, for a process that could not get them itself.
+
+`process_rows` times the same sweep spread over 1, 2, 4 processes on this machine
+(`jax.distributed` on a loopback coordinator, one CPU device each, gloo collectives):
+`python -m jaxunilat._bench._scale --processes 1,2,4 N REPEATS [--one-by-one]` prints
+their rows as one JSON object.
 """
 
 from __future__ import annotations
@@ -166,12 +171,136 @@ def scale_rows(n: int, repeats: int, one_by_one: bool = False) -> list[dict]:
     return rows
 
 
-def main(argv: list[str] | None = None) -> int:
+#: The longest one process count's run may take before its processes are killed [s].
+PROCESS_TIMEOUT = 600.0
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _process_env() -> dict:
+    """This environment with one CPU device per process (loop-kernel options kept)."""
+    import os
+
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("SLURM_", "OMPI_", "JAX_COORDINATOR"))}
+    flags = [f for f in env.get("XLA_FLAGS", "").split() if "xla_force_host_platform_device_count" not in f]
+    env["XLA_FLAGS"] = " ".join([*flags, "--xla_force_host_platform_device_count=1"])
+    env["JAX_PLATFORMS"] = "cpu"
+    return env
+
+
+#: A child process's command (`-c`: `-m` would import this module twice).
+_CHILD = "import sys; from jaxunilat._bench._scale import main; sys.exit(main(sys.argv[1:]))"
+
+
+def _run_processes(count: int, n: int, repeats: int, one_by_one: bool) -> dict:
+    """One `run_sweep` spread over `count` processes; process 0's row (or the failure)."""
+    import subprocess
+    import tempfile
+
+    port = _free_port()
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [sys.executable, "-c", _CHILD, "--process", str(count), "PID", str(port)]
+        cmd += [str(n), str(repeats), f"{tmp}/x.npy"] + (["--one-by-one"] if one_by_one else [])
+        logs = [open(f"{tmp}/log_{i}", "w+") for i in range(count)]  # noqa: SIM115
+        procs = [
+            subprocess.Popen(
+                [str(i) if a == "PID" else a for a in cmd],
+                env=_process_env(),
+                stdout=logs[i],
+                stderr=subprocess.STDOUT,
+            )
+            for i in range(count)
+        ]
+        try:
+            codes = [p.wait(timeout=PROCESS_TIMEOUT) for p in procs]
+        except subprocess.TimeoutExpired:
+            codes = None
+        finally:
+            for p in procs:
+                if p.poll() is None:
+                    p.kill()
+                    p.wait()
+        texts = []
+        for f in logs:
+            f.seek(0)
+            texts.append(f.read())
+            f.close()
+        if codes is None or any(codes):
+            why = "timed out" if codes is None else f"exit statuses {codes}"
+            tail = (texts[0].strip().splitlines() or ["no output"])[-1]
+            return {"processes": count, "failed": f"{why}: {tail}"}
+        return json.loads(texts[0].strip().splitlines()[-1]) | {"x": np.load(f"{tmp}/x.npy")}
+
+
+def process_rows(n: int, repeats: int, counts=(1, 2, 4), one_by_one: bool = False) -> list[dict]:
+    """Throughput of `sweep(trajectory, ...)` over n pairs spread over each of `counts`
+    processes on this machine (one CPU device each; `jax.distributed`, gloo collectives).
+
+    **Returns:** one row per count: `processes`, `traj_per_s`, `wall_s` (median of
+    `repeats` runs after a warm-up, gather to every process included), `compile_s`,
+    `all_ok`, `max_dx_vs_first_m` (max |x - x of the first count| [m]; 0.0: bitwise
+    equal), or `failed` with the reason.
+    """
+    rows, first = [], None
+    for count in counts:
+        row = _run_processes(count, n, repeats, one_by_one)
+        x = row.pop("x", None)
+        if x is not None:
+            first = x if first is None else first
+            row["max_dx_vs_first_m"] = float(np.max(np.abs(x - first)))
+        rows.append(row)
+    return rows
+
+
+def _process_main(argv: list[str]) -> int:
+    """One process of `process_rows`: COUNT ID PORT N REPEATS X_PATH [--one-by-one]."""
     import jax
 
     import jaxunilat  # noqa: F401  (float64)
 
+    count, me, port, n, repeats = (int(a) for a in argv[:5])
+    jax.config.update("jax_cpu_collectives_implementation", "gloo")
+    jax.distributed.initialize(
+        f"127.0.0.1:{port}",
+        count,
+        me,
+        cluster_detection_method="deactivate",
+        initialization_timeout=int(PROCESS_TIMEOUT),
+        heartbeat_timeout_seconds=30,
+    )
+    row = run_sweep(n, repeats, one_by_one="--one-by-one" in argv[6:])
+    if me == 0:
+        np.save(argv[5], row["x"])
+        print(
+            json.dumps(
+                {"processes": count} | {k: v for k, v in row.items() if k not in ("x", "kappa", "k_r")}
+            )
+        )
+    jax.distributed.shutdown()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["--process"]:
+        return _process_main(argv[1:])
+    if argv[:1] == ["--processes"]:
+        import jaxunilat  # noqa: F401  (float64)
+
+        counts = tuple(int(c) for c in argv[1].split(","))
+        n, repeats = int(argv[2]), int(argv[3])
+        print(json.dumps({"rows": process_rows(n, repeats, counts, one_by_one="--one-by-one" in argv[4:])}))
+        return 0
+    import jax
+
+    import jaxunilat  # noqa: F401  (float64)
+
     n, repeats = int(argv[0]), int(argv[1])
     rows = scale_rows(n, repeats, one_by_one="--one-by-one" in argv[2:])
     print(json.dumps({"platform": jax.default_backend(), "device_count": jax.device_count(), "rows": rows}))
@@ -180,3 +309,22 @@ def main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":
     raise SystemExit(main())
+
+
+def process_section(n: int, repeats: int, counts: tuple[int, ...], log) -> dict:
+    """The benchmark's `scale_processes` section: `process_rows` (skipped for no counts),
+    each row logged."""
+    if not counts:
+        return {"how": "skipped at this size", "rows": []}
+    one_by_one = one_by_one_fastest()
+    rows = process_rows(n, repeats, counts, one_by_one)
+    for row in rows:
+        if "failed" in row:
+            log(f"  {row['processes']} process(es): failed ({row['failed']})")
+        else:
+            log(
+                f"  {row['processes']} process(es) x 1 CPU device, N = {row['n']}, {row['strategy']}: "
+                f"{row['traj_per_s']:.1f} traj/s (max |dx| vs {counts[0]}: {row['max_dx_vs_first_m']:.1e} m)"
+            )
+    how = "jax.distributed on 127.0.0.1, one CPU device per process, gloo collectives"
+    return {"how": how, "rows": rows}

@@ -4,11 +4,24 @@ The batch axis is split over a one-axis device `Mesh` ("batch") with `NamedShard
 and `shard_map` runs each device's rows on that device. The same code
 runs on one CPU, one GPU, several local devices (e.g. `XLA_FLAGS=
 --xla_force_host_platform_device_count=2`, one CPU device per core) and, after
-`jax.distributed.initialize()`, on the devices of several hosts.
+`jax.distributed.initialize()`, on the devices of several processes or hosts.
+
+Several processes: every process calls `sweep` with the same arguments (one
+fingerprint per process is compared first; a mismatch is a ValueError). Each process
+places only its own devices' rows, from its own copy (`jax.make_array_from_callback`,
+no inputs cross between processes); the padded batch is split into contiguous blocks
+in the order of `devices` (process 0's devices first, by default), so each row is
+computed by one device only (the padding rows repeat the last one). The result is gathered to every process (`multihost_utils.process_allgather`, through
+the backend's collectives: on CPUs set `jax_cpu_collectives_implementation` to "gloo"
+before `jax.distributed.initialize`) and returned as NumPy arrays. With `devices` from
+one process only (e.g. `jax.local_devices()`) each process sweeps on its own and nothing
+is gathered. `tests/distributed_worker.py` is a complete example; a process that dies
+ends the others through `jax.distributed`'s heartbeat (`heartbeat_timeout_seconds`).
 """
 
 from __future__ import annotations
 
+import zlib
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -121,12 +134,68 @@ def _pad(leaf, n_pad: int):
 
 
 def _gather(out):
-    """Bring a multi-host result to every process (single-host results are returned as is)."""
+    """Bring every leaf that spans several processes to every process, as a NumPy array
+    (each process gets all rows; single-process and process-local results are returned
+    as they are)."""
     if jax.process_count() == 1:
         return out
     from jax.experimental import multihost_utils
 
-    return multihost_utils.process_allgather(out, tiled=True)
+    def one(leaf):
+        if isinstance(leaf, jax.Array) and not leaf.is_fully_addressable:
+            return multihost_utils.process_allgather(leaf, tiled=True)
+        return leaf
+
+    return jax.tree_util.tree_map(one, out)
+
+
+def _place(leaf, sharding, n_pad: int | None):
+    """`leaf` on `sharding`: a batched leaf (`n_pad` an int) padded with `n_pad` copies of
+    its last row, a replicated one (`n_pad` None) as it is.
+
+    A sharding that spans several processes gets each process's own shards from its
+    host copy (`jax.make_array_from_callback`: no data crosses between processes;
+    `_check_same` made sure that every process holds the same batch). Python scalars
+    and arrays that already span processes go through `jax.device_put`.
+    """
+    host_array = isinstance(leaf, np.ndarray) or (isinstance(leaf, jax.Array) and leaf.is_fully_addressable)
+    if sharding.is_fully_addressable or not host_array:
+        return jax.device_put(jnp.asarray(leaf) if n_pad is None else _pad(leaf, n_pad), sharding)
+    host = np.asarray(leaf)
+    if n_pad:
+        host = np.concatenate([host, np.repeat(host[-1:], n_pad, axis=0)], axis=0)
+    return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
+
+
+def _place_all(args, axes, batched, replicated, n_pad: int) -> tuple:
+    """Every argument on its sharding (the batched ones padded)."""
+    return tuple(
+        jax.tree_util.tree_map(lambda leaf: _place(leaf, batched, n_pad), arg)
+        if axis == 0
+        else jax.tree_util.tree_map(lambda leaf: _place(leaf, replicated, None), arg)
+        for arg, axis in zip(args, axes, strict=True)
+    )
+
+
+def _check_same(args, mesh_devices) -> None:
+    """Every process must pass the same batch (each computes its rows from its own copy):
+    one fingerprint per process, compared across the processes of the mesh."""
+    if len({d.process_index for d in mesh_devices}) < max(2, jax.process_count()):
+        return  # one process, or not every process takes part
+    from jax.experimental import multihost_utils
+
+    crc = 0
+    for leaf in jax.tree_util.tree_leaves(args):
+        if isinstance(leaf, jax.Array) and not leaf.is_fully_addressable:
+            continue  # already global: nothing to compare
+        host = np.ascontiguousarray(leaf)
+        crc = zlib.crc32(f"{host.shape}{host.dtype}".encode() + host.tobytes(), crc)
+    every = np.asarray(multihost_utils.process_allgather(np.array([crc], np.uint32))).ravel()
+    if len(set(every.tolist())) > 1:
+        raise ValueError(
+            f"args differ between processes (fingerprints {every.tolist()}, one per process); "
+            "every process must call sweep with the same arguments, in the same order"
+        )
 
 
 def sweep(
@@ -150,7 +219,8 @@ def sweep(
     - `in_axes`: 0 (batched) or `None` (the same for every row), for all arguments
       or one entry per argument. Default 0.
     - `devices`: the devices to shard over. Default: all of `jax.devices()` (every
-      host's devices after `jax.distributed.initialize()`).
+      process's devices after `jax.distributed.initialize()`; then every process must
+      call `sweep` with the same arguments, and each gets the whole result).
     - `batch_size`: `None` vmaps all of a device's rows at once; an integer runs them
       in chunks of that many vmapped rows (`lax.map`), which bounds memory for large
       batches (a vmapped while loop holds every row's buffers). `1` runs the rows one
@@ -161,7 +231,8 @@ def sweep(
       rows one by one anyway (`_batching.py`), so there all three run them alike.
 
     **Returns:** `fn`'s outputs stacked along a leading batch axis of the input's
-    length. The batch is padded to a multiple of the device count with copies of its
+    length (`jax.Array`s; NumPy arrays, on every process, when the devices span several
+    processes). The batch is padded to a multiple of the device count with copies of its
     last row; the padding is removed from the result.
     """
     compiled, placed, n, n_pad = _prepare(fn, args, in_axes, devices, batch_size)
@@ -183,12 +254,8 @@ def _prepare(fn, args, in_axes, devices, batch_size):
     n = _batch_size(args, axes)
     n_pad = -n % len(devices)
     _, batched, replicated = _program(fn, axes, devices, batch_size)
-    placed = tuple(
-        jax.tree_util.tree_map(lambda leaf: jax.device_put(_pad(leaf, n_pad), batched), arg)
-        if axis == 0
-        else jax.tree_util.tree_map(lambda leaf: jax.device_put(jnp.asarray(leaf), replicated), arg)
-        for arg, axis in zip(args, axes, strict=True)
-    )
+    _check_same(args, devices)
+    placed = _place_all(args, axes, batched, replicated, n_pad)
     return _executable(fn, axes, devices, batch_size, placed), placed, n, n_pad
 
 
