@@ -32,6 +32,7 @@ for several times longer than the whole differenced fit takes (design notes).
 
 from __future__ import annotations
 
+import concurrent.futures
 import dataclasses
 import functools
 import math
@@ -61,7 +62,7 @@ from ._robust import (
     flag_outliers,
     robust_scale,
 )
-from ._setup import build, start_point, start_points
+from ._setup import build, point_at, start_point, start_points
 from ._summary import derived_quantities, summarize_fit
 from ._uncertainty import Z95, covariance, goodness_of_fit
 
@@ -193,6 +194,7 @@ class _Options:
     bounds: dict = dataclasses.field(default_factory=dict)
     tol: float = 1e-10
     alone_starts: bool = True
+    defer_alone: bool = False  # leave each file's "alone" e to `_fill_alone` (law="auto")
 
 
 @dataclasses.dataclass
@@ -301,18 +303,14 @@ def fit(
     check_choice("law", law, (*LAWS, "auto"))
     initial, bounds = _check_start(initial, bounds)
     opts = dataclasses.replace(opts, bounds=bounds, tol=tol)
-    laws = LAWS if law == "auto" else (law,)
-    results = {}
-    for name in laws:
-        setup = build(
-            datasets, law=name, nuisance=opts.nuisance, freeze=opts.freeze, initial=initial,
-            bounds=bounds, tol=tol,
-        )  # fmt: skip
-        results[name] = _fit_law(setup, opts)
+    fitted = _fit_laws(datasets, LAWS if law == "auto" else (law,), opts, initial)
+    results = {name: r for name, (r, _) in fitted.items()}
     common = np.logical_and.reduce([r.used for r in results.values()])
     comparison = {name: r.criteria(common) for name, r in results.items()}
     chosen = min(results, key=lambda n: comparison[n]["bic"])
-    result = results[chosen]
+    result, finish = fitted[chosen]
+    if finish is not None:
+        finish()
     result.laws = comparison
     result.law_choice = "auto (lowest BIC)" if law == "auto" else "given"
     if offset_note:
@@ -322,6 +320,35 @@ def fit(
         _restore_clocks(result, originals, clocks)
     result.wall_s = time.perf_counter() - began
     return result
+
+
+def _fit_laws(datasets, laws: tuple[str, ...], opts: _Options, initial: dict) -> dict:
+    """Every law's `_fit_law` (result, finish), by law name.
+
+    Several laws (`law="auto"`) are fitted side by side, each in its own thread: the
+    fits share nothing but the data, and each law compiles its own program (the law is
+    part of the model's structure), so one law's compilation and runs overlap the
+    other's (the XLA compiler and the compiled runs release the GIL). The results do
+    not depend on it: each fit runs exactly the stages it would run alone. Only the
+    first law shows a progress bar. Each file's "alone" e (a batched refit) is left to the
+    chosen law's `finish`: the other law's table is never reported.
+    """
+    defer = len(laws) > 1
+
+    def one(name: str, progress: bool):
+        setup = build(
+            datasets, law=name, nuisance=opts.nuisance, freeze=opts.freeze, initial=initial,
+            bounds=opts.bounds, tol=opts.tol,
+        )  # fmt: skip
+        return _fit_law(setup, dataclasses.replace(opts, progress=progress, defer_alone=defer))
+
+    if len(laws) == 1:
+        return {laws[0]: one(laws[0], opts.progress)}
+    with concurrent.futures.ThreadPoolExecutor(
+        max_workers=len(laws), thread_name_prefix="identify-law"
+    ) as pool:
+        futures = {name: pool.submit(one, name, opts.progress and k == 0) for k, name in enumerate(laws)}
+        return {name: future.result() for name, future in futures.items()}
 
 
 def _refuse_duplicates(datasets) -> None:
@@ -529,15 +556,22 @@ def _check_start(initial, bounds):
     return initial, bounds
 
 
-def _fit_law(setup, opts: _Options) -> FitResult:
-    """Every stage for one contact law: starts, windows, robust pass, final pass, summary."""
+def _fit_law(setup, opts: _Options):
+    """Every stage for one contact law: starts, windows, robust pass, final pass, summary.
+
+    Returns the `FitResult` and `finish`: None, or (with `opts.defer_alone` and several
+    files) the call that adds each file's "alone" e to it (`_fill_alone`)."""
     began = time.perf_counter()
     rows = Rows.make(setup.n_rows, opts.holdout)
     _check_counts(setup, rows)
     prior = setup.evaluator.prior
-    alone_starts = _alone_starts(setup, opts) if opts.alone_starts else []
-    e0, e_source = _initial_restitution(setup, rows)
-    candidates = start_points(setup, e0, opts.starts, np.random.default_rng(opts.seed))
+    with concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="identify-warm") as pool:
+        warming = _warm_evaluator(setup, pool)
+        alone_starts = _alone_starts(setup, opts) if opts.alone_starts else []
+        if warming is not None:
+            warming.result()
+        e0, e_source = _initial_restitution(setup, rows)
+        candidates = start_points(setup, e0, opts.starts, np.random.default_rng(opts.seed))
     runs = _run_starts(setup, candidates, rows, opts)
     best = _windows_from(setup, min(runs, key=lambda run: run.cost), rows, opts)
     scale = None
@@ -576,7 +610,37 @@ def _fit_law(setup, opts: _Options) -> FitResult:
         result.profile = _profile_kappa(setup, best, rows, result, opts)
         _check_profile_minimum(result, best, setup)
     result.wall_s = time.perf_counter() - began
-    return result
+    finish = None
+    if opts.defer_alone and setup.layout.n_files > 1:
+        finish = functools.partial(_fill_alone, result, setup, best, rows, opts)
+    return result, finish
+
+
+def _fill_alone(result: FitResult, setup, best: _Point, rows, opts) -> None:
+    """Each file's "alone" e into `result.datasets` (deferred by `opts.defer_alone`)."""
+    before = setup.evaluator.calls
+    for entry, alone in zip(result.datasets, alone_restitution(setup, best, rows, opts), strict=True):
+        entry["restitution_alone"] = alone
+    result.simulations += setup.evaluator.calls - before
+
+
+def _warm_evaluator(setup, pool) -> concurrent.futures.Future | None:
+    """Hunt–Crossley: compile the fit's program in `pool` while the start is computed.
+
+    Hunt–Crossley's start points simulate single impacts (`hunt_crossley_from_restitution`,
+    a compiled program of its own), and so does its "alone" fit of a few files: the
+    fit's program compiles meanwhile, by one run at the closed-form start (`refine=0`:
+    nothing simulated), with the shapes of every later call. Kelvin–Voigt's start is in
+    closed form: nothing to overlap (None).
+    """
+    if setup.law != "hunt-crossley":
+        return None
+    from ._restitution import hunt_crossley_from_restitution
+
+    e = setup.e0 if setup.e0 is not None else 0.8
+    mass = float(setup.datasets[0].mass)
+    kappa, k_r = hunt_crossley_from_restitution(e, CONTACT_TIME_GUESS, mass, setup.speed, refine=0)
+    return pool.submit(setup.evaluator.warm, point_at(setup, kappa, k_r))
 
 
 def _windows_from(setup, point: _Point, rows, opts) -> _Point:

@@ -14,8 +14,10 @@ holds the six joint indices that make z_f = z[index[f]].
 **Evaluation.** Data sets of one structure (scene, observation type, law) form a
 *group*; a group's problems are padded to the same number of observations and
 stacked, and one compiled call (`evaluate_rows`) runs every file's point and
-finite-difference neighbours in a sequential map: a fit of 30 files compiles once,
-not 30 times. A file's neighbours only perturb the joint entries that file depends
+finite-difference neighbours in one sequential loop: a fit of 30 files compiles once,
+not 30 times. When a file's point itself fails, the neighbours are not run: the point
+is rejected whatever they give (the failing trial steps of a fit are the runs that go to
+`max_steps`, each the cost of hundreds of ordinary ones). A file's neighbours only perturb the joint entries that file depends
 on, so a file costs 1 + 2q runs (q: its free, non-shift entries) and the Jacobian is
 block-sparse: shared columns have a block from every file, local columns only from
 their own.
@@ -184,18 +186,33 @@ class JointEvaluator:
         """The steering prior's residuals (log t_c − log t_c,prior)/sd."""
         return np.asarray([self._prior_row(f, z[ik], z[ir]) for f, ik, ir in self._prior_pairs()])
 
-    def _run(self, per_file_rows: list[np.ndarray]) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        """Residuals (rows, n_f) and ok (rows,) of every file for its (rows, 6) points."""
+    def _run(
+        self, per_file_rows: list[np.ndarray], count: bool = True, skip: bool = True
+    ) -> tuple[list, list]:
+        """Residuals (rows, n_f) and ok (rows,) of every file for its (rows, 6) points
+        (`count`: add the call to `calls`; `skip`: see `evaluate_rows`)."""
         res: list = [None] * self.layout.n_files
         oks: list = [None] * self.layout.n_files
         for g in self.groups:
             zs = np.stack([per_file_rows[f] for f in g.files])
-            r, ok = kept_call("identify.evaluate_rows", evaluate_rows, (g.problem, jax.device_put(zs)))
+            r, ok = kept_call(
+                "identify.evaluate_rows", evaluate_rows, (g.problem, jax.device_put(zs), np.asarray(skip))
+            )
             r, ok = np.asarray(r), np.asarray(ok)
             for k, f in enumerate(g.files):
                 res[f], oks[f] = r[k, :, : g.rows[k]], ok[k]
-        self.calls += 1
+        self.calls += int(count)
         return res, oks
+
+    def warm(self, z: np.ndarray) -> None:
+        """Compile every group's program by one run at the joint point z (not counted in
+        `calls`): the same shapes as every later call, so nothing compiles again."""
+        z = np.asarray(z, dtype=float)
+        rows = self.rows
+        self._run(
+            [np.repeat(z[self.layout.index[f]][None, :], rows, axis=0) for f in range(self.layout.n_files)],
+            False,
+        )
 
     def __call__(self, z: np.ndarray):
         """(r, J, ok) at the joint point z; J has one column per `free` entry."""
@@ -260,7 +277,7 @@ class JointEvaluator:
             chunk = [np.asarray(z, dtype=float) for z in zs[k : k + rows]]
             padded = chunk + [chunk[-1]] * (rows - len(chunk))
             points = [np.stack([z[self.layout.index[f]] for z in padded]) for f in range(self.layout.n_files)]
-            res, oks = self._run(points)
+            res, oks = self._run(points, skip=False)
             for i, z in enumerate(chunk):
                 r = np.concatenate([self._transformed(f, res[f][i]) for f in range(self.layout.n_files)])
                 if self.prior:

@@ -159,8 +159,8 @@ def _nearest(predicted: Array, observed: Array) -> Array:
 
 
 @jax.jit
-def evaluate_rows(problem: Problem, zs) -> tuple[Array, Array]:
-    """Residuals for each row of `zs`, in one compiled sequential map.
+def evaluate_rows(problem: Problem, zs, skip) -> tuple[Array, Array]:
+    """Residuals for each row of `zs`, in one compiled sequential loop.
 
     `problem` is a stack of data sets of one structure (`stack_problems`: every array
     leaf with a leading file axis) and `zs` has shape (files, rows, 6). This is the
@@ -168,13 +168,31 @@ def evaluate_rows(problem: Problem, zs) -> tuple[Array, Array]:
     file's point and its finite-difference neighbours), so only the first call compiles.
     Every leaf of `problem` is an array (`stack_problems`), so a plain `jax.jit` suffices,
     and the command line can keep its executable on disk (`jaxunilat.internal.kept_call`).
+
+    `skip` (a traced bool, so both settings share the program): every file's first row
+    runs first, and when one of them fails the other rows are not run (residuals 1e6,
+    not ok). A point whose own run fails is rejected whatever its neighbours give, and
+    such runs (a trial step into a stiff corner) are the ones that run to `max_steps`.
+    Rows that are independent points (`JointEvaluator.values`) pass False.
     """
-    # One flat map over (file, row) pairs: a nested map would keep the inner solves
-    # from compiling into one loop kernel each.
+    # One flat loop over (row, file) pairs, every file's first row first: a nested map
+    # would keep the inner solves from compiling into one loop kernel each.
     files, rows = zs.shape[:2]
-    flat = jax.tree.map(lambda leaf: jnp.repeat(leaf, rows, axis=0), problem)
-    r, ok = jax.lax.map(lambda pair: pair[0].residuals(pair[1]), (flat, zs.reshape(files * rows, -1)))
-    return r.reshape(files, rows, -1), ok.reshape(files, rows)
+    flat = jax.tree.map(lambda leaf: jnp.tile(leaf, (rows,) + (1,) * (leaf.ndim - 1)), problem)
+    first = jnp.arange(files * rows) < files
+    n_obs = problem.y_obs.shape[-1]
+
+    def body(all_ok, item):
+        p, z, is_first = item
+        run = is_first | all_ok | ~skip
+        r, ok = jax.lax.cond(
+            run, lambda: p.residuals(z), lambda: (jnp.full((n_obs,), 1e6), jnp.zeros((), bool))
+        )
+        return all_ok & (ok | ~is_first), (r, ok)
+
+    pairs = jnp.swapaxes(zs, 0, 1).reshape(files * rows, -1)
+    _, (r, ok) = jax.lax.scan(body, jnp.ones((), bool), (flat, pairs, first))
+    return r.reshape(rows, files, -1).swapaxes(0, 1), ok.reshape(rows, files).T
 
 
 def stack_problems(problems: list[Problem]) -> Problem:

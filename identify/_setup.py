@@ -241,7 +241,11 @@ def start_points(setup: Setup, e0: float, starts: int, rng) -> list[np.ndarray]:
 def start_point(setup: Setup, e: float, t_c: float) -> np.ndarray:
     """The joint z at restitution e and contact time t_c (s), other entries at their guesses."""
     mass = float(setup.datasets[0].mass)
-    kappa, k_r = contact_parameters(setup.law, e, t_c, mass, setup.speed)
+    return point_at(setup, *contact_parameters(setup.law, e, t_c, mass, setup.speed))
+
+
+def point_at(setup: Setup, kappa: float, k_r: float) -> np.ndarray:
+    """The joint z at (κ, k_r) in the law's units, other entries at their guesses."""
     per_file = []
     for values in setup.values:
         v = {"kappa": kappa, "k_r": k_r, **values}

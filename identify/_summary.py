@@ -8,6 +8,7 @@ own entries, rows, outliers, missed bounces and residual scatter go to `datasets
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 
@@ -35,35 +36,41 @@ def law_derived(setup):
     """(log κ, log k_r, mass) → (e, t_c, ∂e/∂u, ∂log t_c/∂u) for the fit's law.
 
     Kelvin–Voigt: the closed forms (no gravity). Hunt–Crossley: e of one impact at the
-    data's typical impact speed (simulated, `law_restitution`; gradient by central
+    data's typical impact speed (simulated as in `law_restitution`; gradient by central
     differences, step 1e-4 in the logs) and the undamped Hertz contact time there.
     """
     if setup.law == "kelvin-voigt":
         return restitution_and_contact_time
-    from ._restitution import law_restitution
-
     speed, g = setup.speed, float(setup.datasets[0].gravity)
 
-    def e_of(lk, lr, mass):
-        return float(
-            np.asarray(
-                law_restitution("hunt-crossley", math.exp(lk), math.exp(lr), mass, [speed], gravity=g)
-            )[0]
-        )
-
     def derived(lk, lr, mass):
-        h = 1e-4
-        e = e_of(lk, lr, mass)
-        ge = np.array(
-            [
-                (e_of(lk + h, lr, mass) - e_of(lk - h, lr, mass)) / (2 * h),
-                (e_of(lk, lr + h, mass) - e_of(lk, lr - h, mass)) / (2 * h),
-            ]
-        )
+        e, ge = _hunt_crossley_restitution(float(lk), float(lr), float(mass), speed, g)
         t_c = contact_time_of("hunt-crossley", lk, lr, mass, speed)
-        return e, t_c, ge, np.array([-1.0 / 2.5, 0.0])
+        return e, t_c, ge.copy(), np.array([-1.0 / 2.5, 0.0])
 
     return derived
+
+
+#: Central-difference step (in log κ, log k_r) of Hunt–Crossley's ∂e/∂(log κ, log k_r).
+_E_STEP = 1e-4
+
+
+@functools.lru_cache(maxsize=256)
+def _hunt_crossley_restitution(lk: float, lr: float, mass: float, speed: float, gravity: float):
+    """Hunt–Crossley's e at `speed` (m/s) and its gradient in (log κ, log k_r).
+
+    The point and its four neighbours are one batch of simulated impacts
+    (`law_restitution`'s program, rtol 1e-12). Cached: the files of a joint fit share κ,
+    k_r and usually the mass, and every file's table asks for the same values.
+    """
+    from ._restitution import _impact_rows
+
+    h = _E_STEP
+    lks = lk + np.array([0.0, h, -h, 0.0, 0.0])
+    lrs = lr + np.array([0.0, 0.0, 0.0, h, -h])
+    e, _ = _impact_rows("hunt-crossley", np.exp(lks), np.exp(lrs), np.full(5, speed), mass, gravity, 1e-12)
+    e = np.asarray(e, dtype=float)
+    return float(e[0]), np.array([(e[1] - e[2]) / (2 * h), (e[3] - e[4]) / (2 * h)])
 
 
 def derived_quantities(setup, z: np.ndarray, cov: np.ndarray, f: int = 0) -> dict:
@@ -160,7 +167,8 @@ def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale, onset
     converged = bool(best.converged and math.isfinite(best.cost) and not at_bound)
     if not converged or noise["verdict"] == "misfit":
         identifiable = {name: False for name in identifiable}
-    alone = alone_restitution(setup, best, rows, opts) if setup.layout.n_files > 1 else None
+    several = setup.layout.n_files > 1
+    alone = alone_restitution(setup, best, rows, opts) if several and not opts.defer_alone else None
     row_sigma = setup.per_row(setup.sigmas)
     residuals = r_data * row_sigma  # prediction − data, in the data's units
     holdout = None

@@ -175,7 +175,7 @@ def test_offset_column_is_closed_form_and_takes_no_runs(reference):
     zs = np.repeat(z[None, :], 5, axis=0)
     zs[0, i] += h
     zs[1, i] -= h
-    res, ok_rows = evaluate_rows(problem, zs[None])
+    res, ok_rows = evaluate_rows(problem, zs[None], np.asarray(False))
     res, ok_rows = np.asarray(res)[0], np.asarray(ok_rows)[0]
     assert np.all(np.asarray(ok_rows))
     np.testing.assert_allclose(jac[:, 2], (res[0] - res[1]) / (2 * h), rtol=1e-8)
