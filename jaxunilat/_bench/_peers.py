@@ -13,6 +13,7 @@ The ball between two rackets [K90 Eq. 3.1–3.3] written from the paper's equati
   damped oscillator with constant forcing in contact), to check the reference.
 
 scipy is imported lazily: it is only needed by `jaxunilat bench` (the `bench` extra).
+The compiled-loop peer (an event-located DOP853 in Numba, same model) is in `_compiled.py`.
 """
 
 from __future__ import annotations

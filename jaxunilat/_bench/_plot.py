@@ -19,7 +19,8 @@ def _series(rows):
 
 
 def work_precision_figure(result: dict):
-    """Error (m, log x) against wall time (s, log y), one line per method; peers dashed.
+    """Error (m, log x) against wall time (s, log y), one line per method; peers dashed
+    (scipy, NumPy, and the compiled loop when Numba ran).
 
     **Returns:** a matplotlib `Figure`.
     """
@@ -29,7 +30,8 @@ def work_precision_figure(result: dict):
     fig = Figure(figsize=(9, 6), constrained_layout=True)
     ax = fig.add_subplot()
     colors = iter(matplotlib.colormaps["tab20"].colors)
-    for method, (errors, walls, peer) in _series(result["work_precision"]).items():
+    compiled = result.get("compiled_loop", {}).get("rows", [])
+    for method, (errors, walls, peer) in _series(result["work_precision"] + compiled).items():
         style = dict(ls="--", marker="o") if peer else dict(ls="-", marker="s", lw=2)
         ax.plot(errors, walls, ms=4, color=next(colors), label=method, **style)
     for key, bound in (("P1", 1e-9), ("P2", 1e-6)):
@@ -48,7 +50,8 @@ def work_precision_figure(result: dict):
 
 
 def throughput_figure(result: dict):
-    """Trajectories per second against batch size N (log-log): sweep, scipy loop, scale-out.
+    """Trajectories per second against batch size N (log-log): sweep, scipy loop,
+    compiled loop (serial and prange), scale-out.
 
     **Returns:** a matplotlib `Figure`.
     """
@@ -64,6 +67,8 @@ def throughput_figure(result: dict):
         ax.plot([r["n"] for r in rows], [r["traj_per_s"] for r in rows], "-s", label=label)
     for r in (r for r in result["throughput"] if r["peer"]):
         ax.axhline(r["traj_per_s"], ls="--", color="C1", label=f"{r['method']} ({r['n']} pairs)")
+    for r in result.get("compiled_loop", {}).get("throughput", []):
+        ax.plot([r["n"]], [r["traj_per_s"]], "D", ms=7, label=r["method"])
     for r in result.get("scale_out", {}).get("rows", []):
         ax.plot(
             [r["n"]], [r["traj_per_s"]], "^", ms=8, label=f"sweep on {r['devices']} device(s), N = {r['n']}"
