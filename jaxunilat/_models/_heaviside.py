@@ -13,6 +13,7 @@ itself is only 3.9 mm).
 from __future__ import annotations
 
 import abc
+import contextlib
 import sys
 import warnings
 
@@ -84,11 +85,30 @@ def _user_call():
     return level, (id(frame), frame.f_lasti, frame.f_lineno)
 
 
+#: Nesting depth of `jumps_located` blocks being traced.
+_LOCATED = [0]
+
+
+@contextlib.contextmanager
+def jumps_located():
+    """Trace a block in which the exact switch is evaluated only at given times of a run
+    whose contact entries and exits were located (the event mode's outputs at its save
+    times): its derivative there, zero on each side of a jump, misses no jump term, so
+    differentiating it does not warn."""
+    _LOCATED[0] += 1
+    try:
+        yield
+    finally:
+        _LOCATED[0] -= 1
+
+
 @_warn_if_differentiated.defjvp
 def _warn_if_differentiated_jvp(primals, tangents):
     # JAX traces the rule once per use of the switch in a traced program (both walls, the
     # solver's first and later steps): one warning per differentiating call, attributed
     # to the user's line, whatever the warnings filter.
+    if _LOCATED[0]:
+        return primals[0], tangents[0]
     level, key = _user_call()
     if key is None or key != _LAST_WARNED[0]:
         _LAST_WARNED[0] = key

@@ -74,6 +74,7 @@ import dataclasses
 import equinox.internal as eqxi
 import jax.numpy as jnp
 
+from .._models._heaviside import jumps_located
 from ._event_locate import locate as _locate  # noqa: F401 (the tests import it from here)
 from ._event_output import (
     EventRecord as EventRecord,
@@ -137,7 +138,8 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
             cond, body, init, max_steps=max_steps, buffers=buffers, kind="checkpointed", checkpoints=max_steps
         )
     final = State(**final)
-    ys = save_outputs(problem, final, y0, outputs)
+    with jumps_located():  # every contact entry and exit is located: no jump term is missed
+        ys = save_outputs(problem, final, y0, outputs)
     stats = dict(
         num_steps=final.n_steps,
         num_accepted_steps=final.n_accepted,
