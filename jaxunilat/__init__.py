@@ -10,15 +10,24 @@ The top level holds the core: models, contact laws, Heaviside options, `simulate
 the paper's reproduction and debugging helpers are namespaces: `jaxunilat.analysis`,
 `jaxunilat.plot`, `jaxunilat.paper`, `jaxunilat.debug`.
 
-Importing the package enables float64 in JAX; it never imports matplotlib or scipy. On a
-CPU, call `use_loop_kernels()` before the first computation: the event mode's step loop
-then compiles into one kernel (about 10× faster per step); the `jaxunilat` command line
-does this itself.
+Importing the package enables float64 in JAX; it never imports matplotlib or scipy. It
+also lets XLA:CPU compile each small loop into one kernel (the event mode's steps run
+about 10× faster): before JAX starts its backend, it adds
+`--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold=1048576` to the
+`XLA_FLAGS` environment variable (inherited by child processes). Set
+`JAXUNILAT_NO_LOOP_KERNELS=1` to keep XLA's defaults. Import jaxunilat before the first
+JAX computation: a backend already started cannot take the option, and the first
+`simulate` then warns once with the fix. `use_loop_kernels()` sets it explicitly.
 """
 
 import jax
 
 jax.config.update("jax_enable_x64", True)
+
+from ._solver._loop_kernels import apply_on_import as _apply_loop_kernels  # noqa: E402
+
+# Before anything computes: XLA reads XLA_FLAGS when JAX starts its backend.
+_apply_loop_kernels()
 
 from . import analysis as analysis, debug as debug, paper as paper, plot as plot  # noqa: E402
 from ._models import (  # noqa: E402

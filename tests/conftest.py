@@ -19,8 +19,9 @@ from reference import BallParams, scipy_reference  # noqa: E402
 
 import jaxunilat  # noqa: E402
 
-# As the command line does: the suite tests the configuration users run (and compiles
-# faster). tests/test_loop_kernels.py checks the default configuration against it.
+# The configuration users run (and it compiles faster): `import jaxunilat` sets it; the
+# explicit call keeps it on with JAXUNILAT_NO_LOOP_KERNELS set. tests/test_loop_kernels.py
+# checks XLA's default configuration against it.
 jaxunilat.use_loop_kernels()
 
 

@@ -163,6 +163,17 @@ def test_bench_without_scipy_fails_with_one_line(monkeypatch, tmp_path, capsys):
     assert not (tmp_path / "b").exists()
 
 
+def test_compiled_peer_without_numba_is_one_line(monkeypatch):
+    from jaxunilat._bench import _compiled
+
+    monkeypatch.setattr(_compiled, "numba", None)
+    lines, rows = [], [_row("mine", 1e-9, 0.001, False)]
+    out = _compiled.bench_section((1e-8,), 4, 1e-9, TS, None, rows, None, lines.append)
+    assert out["rows"] == [] and out["throughput"] == []
+    assert len(lines) == 1 and "numba is not installed" in lines[0]
+    assert rows[0]["vs_compiled"] is None
+
+
 @pytest.mark.slow
 def test_bench_tiny_end_to_end(tmp_path, capsys):
     out = tmp_path / "bench"
@@ -218,6 +229,13 @@ def test_bench_tiny_end_to_end(tmp_path, capsys):
     best_peer = min(r["wall_s"] for r in ok if r["peer"])
     assert math.isclose(result["goals"]["P1"]["value"], mine / best_peer, rel_tol=1e-12)
     assert result["goals"]["P3"]["ratio_vs_scipy_loop"] > 0
+    # The compiled-loop peer (Numba), when installed: accurate, with the ratio columns.
+    compiled = result["compiled_loop"]
+    if compiled["status"] == "measured":
+        tight = {r["setting"]: r for r in compiled["rows"]}["tol 1e-12"]
+        assert tight["error"] <= 1e-9 and tight["crossings"] >= 10 and tight["accepted"] > 0
+        assert all({"vs_scipy", "vs_compiled"} <= set(r) for r in result["work_precision"] if not r["peer"])
+        assert [r["threads"] for r in compiled["throughput"]][0] == 1
     assert "identification" in result
 
     # P7-P9, measured on the users' code (no assertion on the timings themselves).

@@ -126,19 +126,44 @@ def test_never_used_with_throw_or_inside_a_transformation(cache_dir):
 
 
 def test_a_program_with_host_callbacks_is_called_plainly(cache_dir, monkeypatch):
-    """The tsit5 and rk4 modes' programs hold host callbacks even with throw=False
-    (diffrax checks `SaveAt(ts=...)` with `equinox.error_if`), which do not serialize: the
-    cache calls them plainly, without a compile of its own or a try at serializing."""
+    """A program with a host callback (a Python closure of the process) does not
+    serialize: the cache calls it plainly, without a compile of its own or a try at
+    serializing, and keeps nothing."""
     from jax.experimental import serialize_executable
 
-    ball = ju.Ball.table1(2)
-    reference = ju.simulate(ball, ball.paper_initial_state(), T1, solver="tsit5", samples=31, throw=False)
+    from jaxunilat.internal._executables import kept_call
+
+    seen = []
+    jitted = jax.jit(lambda x: (jax.debug.callback(lambda v: seen.append(float(v)), x.sum()), 2.0 * x)[1])
     tried = []
     monkeypatch.setattr(serialize_executable, "serialize", lambda *a: tried.append(a) or 1 / 0)
     enable_executable_cache(cache_dir)
-    again = ju.simulate(ball, ball.paper_initial_state(), T1, solver="tsit5", samples=31, throw=False)
-    _same(again, reference)
-    assert tried == [] and _entries(cache_dir) == []
+    out = kept_call("test.callback", jitted, (np.arange(3.0),))
+    np.testing.assert_array_equal(np.asarray(out), [0.0, 2.0, 4.0])
+    jax.effects_barrier()
+    assert seen == [3.0] and tried == [] and _entries(cache_dir) == []
+
+
+def test_the_tsit5_and_rk4_programs_are_kept(cache_dir):
+    """diffrax's own input checks (host callbacks, whatever `throw` says) are traced away
+    for `simulate`, which makes them itself: the default solver's program is kept, and the
+    kept one gives the same run."""
+    ball = ju.Ball.table1(2)
+    for solver, extra in (("tsit5", {}), ("rk4", {"dt": 1e-5})):
+        reference = ju.simulate(ball, ball.paper_initial_state(), T1, solver=solver, samples=31, **extra)
+        enable_executable_cache(cache_dir)
+        try:
+            kept = ju.simulate(
+                ball, ball.paper_initial_state(), T1, solver=solver, samples=31, throw=False, **extra
+            )
+            again = ju.simulate(
+                ball, ball.paper_initial_state(), T1, solver=solver, samples=31, throw=False, **extra
+            )
+        finally:
+            disable_executable_cache()
+        _same(kept, reference)
+        _same(again, reference)
+    assert len(_entries(cache_dir)) == 2
 
 
 def test_the_key_covers_values_that_decide_the_program(monkeypatch):

@@ -1,7 +1,8 @@
 """`use_loop_kernels`: the XLA option it sets, that the event loop qualifies for it, and
-that results match the default configuration (checked in a fresh process without it).
+that results match XLA's default configuration (checked in a fresh process opted out).
 
-The suite runs with the option on (conftest.py), as the command line does.
+The suite runs with the option on, as `import jaxunilat` sets it (and conftest.py calls
+`use_loop_kernels`); tests/test_default_fast.py checks the import's part.
 """
 
 import json
@@ -36,6 +37,7 @@ def _flags_after(monkeypatch, before, started=False, **kw):
     else:
         monkeypatch.setenv("XLA_FLAGS", before)
     monkeypatch.setattr(_loop_kernels, "_backend_started", lambda: started)
+    monkeypatch.setattr(_loop_kernels, "_ADDED", [])
     active = ju.use_loop_kernels(**kw)
     return active, os.environ.get("XLA_FLAGS")
 
@@ -150,10 +152,11 @@ _RUN = textwrap.dedent(
 
 
 def test_results_match_the_default_configuration():
-    """A fresh process without the option (XLA's default thunk-by-thunk loop) gives the
-    same steps, and outputs and contact times equal to rounding."""
+    """A fresh process opted out of the option (XLA's default thunk-by-thunk loop) gives
+    the same steps, and outputs and contact times equal to rounding."""
     env = dict(os.environ)
-    env["XLA_FLAGS"] = re.sub(rf"--xla_backend_extra_options=\S*{OPTION}=\d+,?", "", env.get("XLA_FLAGS", ""))
+    env["XLA_FLAGS"] = _loop_kernels.without_option(env.get("XLA_FLAGS", ""))
+    env[_loop_kernels.OPT_OUT] = "1"
     proc = subprocess.run([sys.executable, "-c", _RUN], env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
     default = json.loads(proc.stdout.strip().splitlines()[-1])

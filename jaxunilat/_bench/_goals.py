@@ -1,11 +1,12 @@
-"""The benchmark's goals P1–P5 and P7–P9: values from the measured sections, notes on missed ones.
+"""The benchmark's goals P1–P5 and P7–P10: values from the measured sections, notes on missed ones.
 
 The goals (targets in `GOALS`): P1, P2 ratios
 against the best peer in the same run; P3 trajectories per second (and the ratio
 against a scipy loop); P4 gradient / forward; P5 compile time. P7–P9 are measured on
 code as users write it (`_user.py`): P7 plain `jax.jit(jax.vmap(f))` against rows one
 by one, P8 `jax.grad` against a forward solve, P9 the command line's second run against
-its first. There is no P6. Where a goal is missed, `notes` says why and what would close
+its first, P10 a plain script that never calls `use_loop_kernels` against the tuned
+one (each a fresh process). There is no P6. Where a goal is missed, `notes` says why and what would close
 it, from the run's own figures.
 """
 
@@ -26,6 +27,11 @@ GOALS = {
     "P8": dict(target=5.0, unit="time ratio jax.jit(jax.grad(loss)) / jax.jit(loss), misfit in (kappa, k_r)"),
     "P9": dict(
         target=0.5, unit="wall ratio second / first `jaxunilat simulate ball --solver event`, new cache"
+    ),
+    "P10": dict(
+        target=1.2,
+        unit="time ratio default user / tuned (no use_loop_kernels call / with it), fresh processes, "
+        "worse of jax.jit(f) and jax.jit(jax.vmap(f))",
     ),
 }
 P1_ERROR, P2_ERROR, P3_ERROR = 1e-9, 1e-6, 1e-8
@@ -161,6 +167,8 @@ def user_goals(user: dict) -> dict:
         "reproduce": "export JAXUNILAT_CACHE_DIR=$(mktemp -d); time jaxunilat simulate ball --solver event; "
         "time jaxunilat simulate ball --solver event",
     }
+    if "default_user" in user:
+        out["P10"] = _default_user_goal(user["default_user"])
     for key, goal in out.items():
         value = goal["value"]
         out[key] = {
@@ -169,6 +177,29 @@ def user_goals(user: dict) -> dict:
             **goal,
             "met": value is not None and value <= GOALS[key]["target"],
         }
+    return out
+
+
+def _default_user_goal(row: dict) -> dict:
+    """P10 from the `default_user` section: default / tuned, the worse of its two ratios."""
+    default, tuned = row.get("default", {}), row.get("tuned", {})
+    out = {
+        "value": row.get("ratio"),
+        "measured": f"{row.get('how', '')}; {row.get('scene', '')}",
+        "n": row.get("n"),
+        "one_ratio": row.get("one_ratio"),
+        "vmap_ratio": row.get("vmap_ratio"),
+        "default_one_s": default.get("one_s"),
+        "tuned_one_s": tuned.get("one_s"),
+        "reproduce": "the Python in bench.json's user.default_user.default_code, in a fresh process "
+        "(tuned: with ju.use_loop_kernels() after the imports)",
+    }
+    if row.get("ratio") is not None:
+        n = row["n"]
+        out["default_traj_per_s"] = n / default["vmap_s"]
+        out["tuned_traj_per_s"] = n / tuned["vmap_s"]
+        out["default_loop_kernel_bytes"] = default.get("loop_kernel_bytes")
+        out["default_warnings"] = default.get("warnings")
     return out
 
 
@@ -189,7 +220,7 @@ def notes(result: dict, out: dict) -> dict:
     if not kernels:
         cost += (
             "; this run had XLA's default CPU options, where every step pays ~100 thunk launches "
-            "(5-8 us): call jaxunilat.use_loop_kernels() first, as the command line does"
+            "(5-8 us): import jaxunilat before JAX computes (it sets the option), or unset JAXUNILAT_NO_LOOP_KERNELS"
         )
     for key in ("P1", "P2"):
         if not out[key]["met"]:
@@ -238,7 +269,11 @@ def _user_notes(result: dict, out: dict) -> dict:
         return notes
     user = result["user"]
     # `goals` added P7–P9 from the same section; a value of None (P9 failed) has no figures.
-    missed = {key for key in ("P7", "P8", "P9") if not out[key]["met"] and out[key]["value"] is not None}
+    missed = {
+        key
+        for key in ("P7", "P8", "P9", "P10")
+        if key in out and not out[key]["met"] and out[key]["value"] is not None
+    }
     branches = result.get("profile", {}).get("cond_branches")
     if "P7" in missed:
         vm = user["vmap_against_rows"]
@@ -275,7 +310,29 @@ def _user_notes(result: dict, out: dict) -> dict:
             "cache) or traces and lowers it to find its compilation-cache key. What would close it: less "
             "import work (jax and diffrax take most of it)."
         )
+    if "P10" in out:
+        notes["P10"] = _default_user_note(out["P10"], "P10" in missed)
     return notes
+
+
+def _default_user_note(goal: dict, missed: bool) -> str:
+    """What P10 found: where the default user loses against the tuned one, and why."""
+    if goal["value"] is None:
+        return "not measured: a script failed (see user.default_user in bench.json)"
+    kernels = goal.get("default_loop_kernel_bytes")
+    found = (
+        f"jax.jit(f) {goal['one_ratio']:.2f}x, jax.jit(jax.vmap(f)) {goal['vmap_ratio']:.2f}x the tuned "
+        f"script; the plain script ran with loop kernels of {kernels} bytes"
+        if kernels is not None
+        else "the plain script ran without the loop-kernel option"
+    )
+    if not missed:
+        return f"met: {found} (import jaxunilat sets XLA's loop-kernel option; JAXUNILAT_NO_LOOP_KERNELS=1 opts out)."
+    return (
+        f"missed: {found}. Without the option each event-mode step launches ~100 separate kernels "
+        "(5-8 us). What would close it: the option on at import (is JAXUNILAT_NO_LOOP_KERNELS set, or did "
+        "JAX start its backend before the import?), or a step loop that XLA:CPU runs fast without it."
+    )
 
 
 def goal_table(result: dict) -> str:

@@ -35,9 +35,9 @@ from collections.abc import Callable
 import numpy as np
 
 from ..internal._io import bundled_data
-from . import _peers as peers, _user as user
-from ._goals import P3_ERROR, goal_table as goal_table, goals
-from ._scale import SAMPLES, T1, Y0
+from . import _joint as joint, _peers as peers, _user as user
+from ._goals import P1_ERROR, P3_ERROR, goal_table as goal_table, goals
+from ._scale import SAMPLES, T1, Y0, process_section
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,8 +63,10 @@ class Size:
     gradient: bool = True  # the gradient section (its reverse-mode compile is the slowest)
     gradient_pieces: tuple[str, ...] = ("tsit5",)  # P4 is on the first (the default pieces)
     scale_out: bool = True  # the 1-device against 2-device subprocess
+    scale_processes: tuple[int, ...] = (1, 2, 4)  # the sweep over this many processes; (): skip
     identify_sets: int = 0  # bundled data sets to fit (the default one first)
     identify_runs: int = 1  # fits per data set (the first includes compilation)
+    joint_files: int = 0  # joint_fit_30: a cold `identify --law auto` of this many throws (0: skipped)
     # P7-P9 (`_user.py`): P7's rows, and P9's commands (each run twice in fresh processes).
     user_n: int = 1000
     user_cli: tuple[str, ...] = ("simulate", "identify", "reproduce")
@@ -77,6 +79,8 @@ class Size:
     # median of 5 can land on either mode.
     min_time_s: float = 0.25
     max_repeats: int = 51
+    # The compiled-loop peer's tolerances (`_compiled.py`, Numba; rtol = atol).
+    compiled_tols: tuple[float, ...] = tuple(10.0**-k for k in range(4, 13))
 
 
 _ALL_SCENES = ("drag on", "drag = 0", "drag None", "upper far", "upper None")
@@ -107,6 +111,7 @@ SIZES = {
         skip_scenes=_ALL_SCENES,
         error_checks=3,
         identify_sets=10,
+        joint_files=joint.JOINT_FILES,
         identify_runs=2,
         gradient_pieces=("tsit5", "dopri8"),
     ),
@@ -132,6 +137,7 @@ SIZES = {
         user_n=100,
         user_cli=("simulate", "identify"),  # reproduce --quick adds ~15 s: the full size runs it
         compare_ns=(),  # ~20 s of compiles; P7 times plain vmap against rows one by one
+        scale_processes=(),  # a process start-up and compile per count (tests/test_distributed_sweep.py)
     ),
     # Only for the test suite (hidden flag `--size tiny`): every section, smallest settings.
     "tiny": Size(
@@ -153,9 +159,11 @@ SIZES = {
         error_checks=1,
         gradient=False,  # tests/test_event_mode.py checks event-mode gradients against FD
         scale_out=False,  # tests/test_sweep.py runs the 2-device sweep
+        scale_processes=(),  # tests/test_distributed_sweep.py runs 2 and 4 processes
         min_time_s=0.0,
         user_n=4,
         user_cli=("simulate",),
+        compiled_tols=(1e-8, 1e-10, 1e-12),
     ),
 }
 
@@ -332,6 +340,7 @@ def _project_rows(size: Size, ts, x_ref, log) -> tuple[list[dict], dict]:
                 "peer": False,
                 "runs": runs,
                 "steps": int(sol.num_steps),
+                "accepted": int(sol.num_accepted_steps),
                 "rejected": int(sol.num_rejected_steps),
                 "status": int(sol.status),
             }
@@ -858,7 +867,7 @@ def run_bench(size_name: str = "full", log: Callable[[str], None] = print) -> di
     """Run every section at `size_name` ("full", "quick" or "tiny") and return `bench.json`'s dict.
 
     **Returns:** a dictionary with `machine`, `goals` (P1–P5, P7–P9), `work_precision`,
-    `throughput` and further sections (`scale_out`, `gradient`, `compile_s`,
+    `throughput` and further sections (`scale_out`, `scale_processes`, `gradient`, `compile_s`,
     `no_retrace`, `static_structure`, `profile`, `reference_check`, `identification`,
     `user`: P7–P9's measurements and the code they time).
     """
@@ -877,8 +886,23 @@ def run_bench(size_name: str = "full", log: Callable[[str], None] = print) -> di
     result["compile_s"] = compiled
     log("throughput:")
     result["throughput"], result["throughput_checks"] = _throughput(size, result["work_precision"], log)
+    from . import _compiled
+
+    log("compiled loop (event-located DOP853 in Numba), a peer beside scipy:")
+    result["compiled_loop"] = _compiled.bench_section(
+        size.compiled_tols,
+        max(size.throughput_ns),
+        P1_ERROR,
+        ts,
+        ref.x,
+        result["work_precision"],
+        lambda fn: _timed(fn, size),
+        log,
+    )
     result["scale_out"] = _scale_out(size, log) if size.scale_out else {"how": f"skipped at size {size.name}"}
     result["scale_out"].setdefault("rows", [])
+    log("sweep over processes (jax.distributed, this machine):")
+    result["scale_processes"] = process_section(size.scale_n, max(2, size.repeats), size.scale_processes, log)
     if size.gradient:
         log("gradient cost:")
         result["gradient"] = _gradient(size, log)
@@ -891,12 +915,18 @@ def run_bench(size_name: str = "full", log: Callable[[str], None] = print) -> di
     result["profile"] = _profile(log)
     result["profile"]["per_step_fit"] = per_step_fit(project)
     result["identification"] = _identification(size, log)
+    result["joint_fit"] = (
+        joint.joint_fit(log, n=size.joint_files)
+        if size.joint_files
+        else {"status": f"skipped at size {size.name}"}
+    )
     log("the way users write code (P7-P9):")
     result["user"] = {
         "code": user.USER_CODE,
         "vmap_against_rows": user.vmap_against_rows(size, _timed_together, log),
         "reverse_against_forward": user.reverse_against_forward(size, _timed_together, log),
         "command_line": user.command_line(size, log),
+        "default_user": user.default_user(size, log),
     }
     result["goals"] = goals(result)
     result["total_s"] = time.perf_counter() - started

@@ -1,4 +1,4 @@
-"""The benchmark's goals P7–P9, measured the way users write code.
+"""The benchmark's goals P7–P10, measured the way users write code.
 
 One scene for all three: Table 1 example 2 from the lower racket, event mode at
 rtol = atol = 1e-10, 201 save times over [0, 1] s, every other option at its default
@@ -19,10 +19,16 @@ rtol = atol = 1e-10, 201 save times over [0, 1] s, every other option at its def
   directory (`JAXUNILAT_CACHE_DIR`: the compilation cache and `simulate`'s executables);
   the second against the first.
   `identify` (the bundled data) and `reproduce --quick` likewise, where the size has them.
+- P10 (`default_user`): the default configuration against the tuned one, each in a fresh
+  process (`DEFAULT_USER_CODE`): a plain script that never calls `use_loop_kernels`
+  (what `import jaxunilat` sets up is all it gets) against the same script with the
+  explicit call first; one `jax.jit(f)` solve and `jax.jit(jax.vmap(f))` over
+  `DEFAULT_USER_N` rows, warm medians, the worse of the two ratios default / tuned.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -67,6 +73,38 @@ theta = jnp.array([1.1e4, 0.18])
 jax.jit(loss)(theta); jax.jit(jax.grad(loss))(theta)
 jax.jit(jax.jacfwd(lambda th: loss(th, "forward")))(theta)
 """
+
+
+#: P10's script, run as `python -c` in a fresh process: `{setup}` is empty for the
+#: default user, `ju.use_loop_kernels()` for the tuned one; `{n}` rows, `{repeats}` runs.
+DEFAULT_USER_CODE = """\
+import json, statistics, time, warnings
+warnings.simplefilter("always")
+with warnings.catch_warnings(record=True) as caught:
+    import jax, numpy as np
+    import jaxunilat as ju
+    {setup}
+    y0 = (-0.4, -1 / 0.122)
+    def f(kappa):
+        return ju.simulate(ju.Ball.table1(2, kappa=kappa), y0, 1.0, solver="event",
+                           rtol=1e-10, atol=1e-10, samples=201).ys["x"]
+    one, many = jax.jit(f), jax.jit(jax.vmap(f))
+    kappas = jax.device_put(1e4 * np.linspace(0.8, 1.2, {n}))
+    kappa = jax.device_put(1e4)
+    def timed(fn, calls):
+        start = time.perf_counter()
+        for _ in range(calls):
+            jax.block_until_ready(fn())
+        return (time.perf_counter() - start) / calls
+    timed(lambda: one(kappa), 1); timed(lambda: many(kappas), 1)  # compile
+    calls = max(1, int(0.02 / timed(lambda: one(kappa), 3)))
+    one_s = statistics.median(timed(lambda: one(kappa), calls) for _ in range({repeats}))
+    vmap_s = statistics.median(timed(lambda: many(kappas), 1) for _ in range({repeats}))
+print(json.dumps(dict(one_s=one_s, vmap_s=vmap_s, loop_kernel_bytes=ju.debug.loop_kernel_bytes(),
+                      warnings=[str(w.message) for w in caught])))
+"""
+#: P10's rows (the size's `user_n` where that is below 100: the test suite's tiny size).
+DEFAULT_USER_N = 400
 
 
 def _run(kappa, k_r=None, autodiff="reverse"):
@@ -281,6 +319,59 @@ def _child_env(cache: str) -> dict:
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH", "")) if p)
     return env
+
+
+def _user_process(setup: str, n: int, repeats: int) -> dict:
+    """P10's script (`DEFAULT_USER_CODE`) in a fresh process with the user's environment:
+    `XLA_FLAGS` without the loop-kernel option this process has (the child's import adds
+    it again, or its `setup` does), and no opt-out."""
+    from .._solver._loop_kernels import OPT_OUT, without_option
+
+    env = _child_env(tempfile.gettempdir())
+    env.pop(OPT_OUT, None)
+    flags = without_option(env.get("XLA_FLAGS", ""))
+    if flags:
+        env["XLA_FLAGS"] = flags
+    else:
+        env.pop("XLA_FLAGS", None)
+    code = DEFAULT_USER_CODE.format(setup=setup or "pass", n=n, repeats=repeats)
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=False)
+    if proc.returncode != 0:
+        return {"error": (proc.stderr.strip().splitlines() or ["no output"])[-1]}
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def default_user(size, log) -> dict:
+    """P10: the users' plain script (no `use_loop_kernels` call) against the tuned one
+    (the explicit call first), each in a fresh process; default / tuned, the worse of a
+    single `jax.jit(f)` solve and `jax.jit(jax.vmap(f))` over the rows."""
+    n = DEFAULT_USER_N if size.user_n >= 100 else size.user_n  # the test suite's tiny size: few rows
+    repeats = max(size.repeats, 3)
+    default = _user_process("", n, repeats)
+    tuned = _user_process("ju.use_loop_kernels()", n, repeats)
+    out = {
+        "scene": _scene(),
+        "n": n,
+        "how": "each script a fresh process (python -c), the environment without the loop-kernel option; "
+        "warm medians of one jax.jit(f) solve and of jax.jit(jax.vmap(f)) over n values of kappa",
+        "default_code": DEFAULT_USER_CODE.format(setup="pass", n=n, repeats=repeats),
+        "tuned_setup": "ju.use_loop_kernels()",
+        "default": default,
+        "tuned": tuned,
+        "ratio": None,
+    }
+    if "error" in default or "error" in tuned:
+        log(f"  P10 failed: {default.get('error') or tuned.get('error')}")
+        return out
+    out["one_ratio"] = default["one_s"] / tuned["one_s"]
+    out["vmap_ratio"] = default["vmap_s"] / tuned["vmap_s"]
+    out["ratio"] = max(out["one_ratio"], out["vmap_ratio"])
+    log(
+        f"  P10 default user: one solve {1e3 * default['one_s']:.3f} ms (tuned {1e3 * tuned['one_s']:.3f} ms), "
+        f"jit(vmap(f)) {n / default['vmap_s']:.0f} traj/s (tuned {n / tuned['vmap_s']:.0f}): "
+        f"ratio {out['ratio']:.2f}"
+    )
+    return out
 
 
 def _bundled_trace() -> str:

@@ -11,8 +11,9 @@ once JAX has started its backend:
 `check_environment` turns each into one `UsageError` line naming the variable and its
 value (exit 2). The `XLA_FLAGS` check starts XLA's CPU client in a short subprocess
 (about 0.3-0.7 s: an `import jaxlib` and a client start), and only when the user set
-the variable and JAX has not started its backend yet; with the variable unset it does
-nothing.
+the variable and JAX has not started its backend yet; with the variable unset, or
+holding nothing but the loop-kernel option that `import jaxunilat` adds (XLA knows it),
+it does nothing.
 """
 
 from __future__ import annotations
@@ -48,9 +49,14 @@ def check_xla_flags(user_flags: str | None) -> None:
     `user_flags` is the variable as the user set it (None or empty: nothing is checked,
     at no cost). The check runs the current environment's `XLA_FLAGS` (the user's plus
     what the command line adds) in a subprocess; it is skipped once JAX has started its
-    backend (XLA then read the variable already, without aborting).
+    backend (XLA then read the variable already, without aborting), and for the
+    loop-kernel option alone (`jaxunilat._solver._loop_kernels`).
     """
-    if not user_flags or not user_flags.strip() or _backend_started():
+    from .._solver._loop_kernels import user_flags as set_by_user, without_option
+
+    # The option `import jaxunilat` added (here, or in a parent process) is XLA's own.
+    user_flags = set_by_user(user_flags)
+    if not without_option(user_flags or "") or _backend_started():
         return
     try:
         child = subprocess.run(

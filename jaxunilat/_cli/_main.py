@@ -601,12 +601,12 @@ def main(argv: list[str] | None = None) -> int:
     interrupt while one is being written leaves the earlier file of that name as it was,
     at worst with a hidden `.NAME.*.tmp` beside it.
     """
-    from .._solver._loop_kernels import use_loop_kernels
+    from .._solver._loop_kernels import apply_on_import, user_flags
 
-    # XLA_FLAGS as the user set it, before the command line adds its own option.
-    user_xla_flags = os.environ.get("XLA_FLAGS")
-    # Before anything computes: the event mode's loops compile into single kernels.
-    use_loop_kernels()
+    # XLA_FLAGS as the user set it, without the loop-kernel option the import added.
+    user_xla_flags = user_flags(os.environ.get("XLA_FLAGS"))
+    # The import added it already, unless JAXUNILAT_NO_LOOP_KERNELS=1 opts out.
+    apply_on_import()
     remove_watcher = _exit_on_interrupt()
     # A solver failure raised from inside a compiled run (throw=True) passes through a
     # host callback, which JAX also logs with a traceback; the error's one line suffices.

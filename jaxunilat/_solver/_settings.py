@@ -186,10 +186,15 @@ _CACHE = DeviceCache(128)
 _UNCACHED = object()
 
 
+#: Types whose values are their own cache key (with the type: True, 1 and 1.0 differ).
+_KEYED_TYPES = frozenset((float, int, bool, str, type(None)))
+
+
 def _plain(value):
     """A hashable stand-in for a plain number or None; `_UNCACHED` for anything else."""
-    if value is None or isinstance(value, str):
-        return value
+    kind = type(value)
+    if kind in _KEYED_TYPES:
+        return (kind, value)
     if isinstance(value, (bool, np.bool_)):
         return ("bool", bool(value))
     if isinstance(value, (int, float, np.integer, np.floating)):
@@ -205,11 +210,12 @@ def make_settings(method: str, span, **kwargs) -> SolverSettings:
     With plain numbers the same arguments give the same (immutable) settings object
     from a small cache, validated once; arrays and tracers are validated every time.
     """
-    parts = tuple((name, _plain(value)) for name, value in sorted(kwargs.items()))
+    parts = tuple(map(_plain, kwargs.values()))
     span_key = _plain(span) if method == "rk4" else None
-    if not isinstance(method, str) or span_key is _UNCACHED or any(p is _UNCACHED for _, p in parts):
+    if type(method) is not str or span_key is _UNCACHED or _UNCACHED in parts:
         return _build_settings(method, span, **kwargs)
-    key = (method, span_key, parts)
+    # Keyword order is part of the key (a different order only keeps a second copy).
+    key = (method, span_key, tuple(kwargs), parts)
     return _CACHE.get(key, lambda: _build_settings(method, span, **kwargs))
 
 

@@ -33,6 +33,7 @@ from ..internal._validate import (
     real_number,
     runtime_check,
 )
+from . import _loop_kernels
 from ._batching import batching_mode, rowwise_differentiable
 from ._device_cache import DeviceCache
 from ._event import _EV as _EVENT_COLUMNS, EventRecord, event_solve
@@ -427,7 +428,13 @@ def _default_times(t0, t1, samples: int):
     return _TIMES.get(key, lambda: (t0, t1, np.linspace(key[0], key[1], samples)))
 
 
+_ZERO = np.zeros((), np.float64)
+_ZERO.flags.writeable = False
+
+
 def _time_span(t_span):
+    if _plain_floats((t_span,), 1) is not None and t_span > 0:
+        return _ZERO, np.asarray(t_span, dtype=np.float64)  # the common case: t1 > t0 = 0
     if isinstance(t_span, (tuple, list)):
         if len(t_span) != 2:
             raise ValueError(f"t_span = {t_span!r} must be t1 or a pair (t0, t1), in s")
@@ -506,12 +513,20 @@ def simulate(
     Changing only parameter values (model leaves, y0, t_span, ts, dt, rtol, atol)
     does not retrace. Batch with `jax.vmap`, differentiate with `jax.grad` (or
     `jax.jacfwd` with `autodiff="forward"`); use the event mode, or a smooth Heaviside
-    option, for meaningful gradients of the penalty model. On a CPU, call
-    `jaxunilat.use_loop_kernels()` before the first computation: the solvers' step loops
-    then compile into single kernels (3–8× faster calls, README, Performance).
+    option, for meaningful gradients of the penalty model. On a CPU the solvers' step
+    loops compile into single kernels (3–8× faster calls, README, Performance) when
+    jaxunilat is imported before JAX's first computation; otherwise the first call warns
+    once with the fix (`jaxunilat.use_loop_kernels`; `JAXUNILAT_NO_LOOP_KERNELS=1` opts
+    out).
+
+    A concrete call's validation is cheap on repeated calls: what depends only on the
+    model's class and the static settings is checked once per combination, the solver
+    settings and default save times built from plain numbers are cached.
     """
     if not isinstance(model, AbstractModel):
         raise ValueError(f"model = {model!r} is not a jaxunilat model (e.g. Ball.table1(2))")
+    if not _loop_kernels._CHECKED:
+        _loop_kernels.warn_if_missing(stacklevel=3)
     if not jax.config.jax_enable_x64:
         raise ValueError(
             "precision = float32 is not supported (jax_enable_x64 is off); valid: float64. In float32 "
@@ -546,8 +561,39 @@ def simulate(
     return _run(model, y0, t0, t1, ts, settings, outputs, bool(throw))
 
 
+#: Checks that depend only on static things (the model's class, `outputs`, the event
+#: mode's structure), by their key: passed once, they pass again (each costs more than
+#: the look-up). Bounded: cleared when it reaches `_STATIC_SIZE` keys.
+_STATIC_OK: dict = {}
+_STATIC_SIZE = 1024
+
+
+def _static_once(key, check, *args):
+    """`check(*args)`, or its result kept under the hashable `key` (None: not kept)."""
+    if key is not None:
+        try:
+            return _STATIC_OK[key]
+        except (KeyError, TypeError):  # new, or not hashable
+            pass
+    result = check(*args)
+    if key is not None:
+        if len(_STATIC_OK) >= _STATIC_SIZE:
+            _STATIC_OK.clear()
+        try:
+            _STATIC_OK[key] = result
+        except TypeError:
+            pass
+    return result
+
+
 def _check_outputs(model, outputs) -> tuple[str, ...]:
-    """`outputs` as a tuple of the model's output names (ValueError otherwise)."""
+    """`outputs` as a tuple of the model's output names (ValueError otherwise); a tuple
+    is checked once per model class."""
+    key = ("outputs", type(model), outputs) if type(outputs) is tuple else None
+    return _static_once(key, _checked_outputs, model, outputs)
+
+
+def _checked_outputs(model, outputs) -> tuple[str, ...]:
     if isinstance(outputs, str):
         raise InputTypeError(
             f"outputs = {outputs!r} is a string; give a tuple of names from "
@@ -564,16 +610,48 @@ def _check_outputs(model, outputs) -> tuple[str, ...]:
 def _check_y0(model, y0) -> Array:
     """The initial state as a float64 array of the model's state shape, checked finite
     and (when concrete) physically possible (`model.check_initial_state`)."""
+    fast = _plain_floats(y0, len(type(model).state_names))
+    if fast is not None:
+        host = np.array(fast, dtype=np.float64)
+        # Through the class: `model.check_initial_state` builds an equinox bound-method
+        # Module, which costs more than the check.
+        type(model).check_initial_state(model, host)
+        return _INITIAL_STATES.get(host.tobytes(), lambda: host)
     y0 = as_float_array(real_number("y0", y0))
     if y0.shape != (len(model.state_names),):
         raise ValueError(
             f"y0 has shape {y0.shape}; expected ({len(model.state_names)},) for the state "
             f"({', '.join(model.state_names)})"
         )
-    check_range("y0", y0)
     if is_concrete(y0):
-        model.check_initial_state(y0)
+        # The checks read a NumPy view: indexing a device array dispatches an operation.
+        host = np.asarray(y0)
+        check_range("y0", host)
+        type(model).check_initial_state(model, host)
     return y0
+
+
+#: Initial states given as plain numbers, on the device, by their bytes: a repeated y0
+#: is not copied to the device again.
+_INITIAL_STATES = DeviceCache(64)
+
+
+def _plain_floats(value, size: int) -> tuple | None:
+    """`value` when it is a tuple or list of `size` finite Python floats or ints (not
+    bools, at most 2**53 in magnitude), the common concrete case checked without NumPy;
+    None otherwise."""
+    if type(value) not in (tuple, list) or len(value) != size:
+        return None
+    for v in value:
+        if type(v) is float:
+            if not math.isfinite(v):
+                return None
+        elif type(v) is not int or not -_EXACT_INT <= v <= _EXACT_INT:
+            return None
+    return value
+
+
+_EXACT_INT = 2**53
 
 
 def _save_times(t0, t1, ts, samples, num_outputs: int):
@@ -602,7 +680,13 @@ def _save_times(t0, t1, ts, samples, num_outputs: int):
 
 def _check_event_mode(model, max_events) -> None:
     """Refuse a model the event mode cannot solve, and an event buffer beyond
-    `MAX_OUTPUT_BYTES`."""
+    `MAX_OUTPUT_BYTES` (once per model class, Heaviside option and `max_events`)."""
+    plain = type(max_events) is int
+    key = ("event", type(model), type(getattr(model, "heaviside", None)), max_events) if plain else None
+    _static_once(key, _checked_event_mode, model, max_events)
+
+
+def _checked_event_mode(model, max_events) -> None:
     heaviside = getattr(model, "heaviside", None)
     if heaviside is not None and not isinstance(heaviside, Exact):
         raise ValueError(
@@ -633,7 +717,8 @@ def _check_rk4_step(model, dt, y0) -> None:
     if not (is_concrete(dt) and is_concrete(y0) and _is_concrete_tree(model)):
         return
     # On the host: NumPy copies of the leaves (no device dispatch per operation).
-    found = jax.tree_util.tree_map(np.asarray, model).rk4_step_limit(np, np.asarray(y0))
+    host = jax.tree_util.tree_map(np.asarray, model)
+    found = type(host).rk4_step_limit(host, np, np.asarray(y0))  # no bound-method Module
     step = float(np.max(np.asarray(dt)))
     if found is None:
         if getattr(model, "num_switches", 0) > 0:
