@@ -52,10 +52,9 @@ def check_xla_flags(user_flags: str | None) -> None:
     backend (XLA then read the variable already, without aborting), and for the
     loop-kernel option alone (`jaxunilat._solver._loop_kernels`).
     """
-    from .._solver._loop_kernels import user_flags as set_by_user, without_option
+    from .._solver._loop_kernels import without_option
 
-    # The option `import jaxunilat` added (here, or in a parent process) is XLA's own.
-    user_flags = set_by_user(user_flags)
+    # The option `import jaxunilat` adds (here, or in a parent process) is XLA's own.
     if not without_option(user_flags or "") or _backend_started():
         return
     try:

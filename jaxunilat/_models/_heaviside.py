@@ -15,6 +15,7 @@ from __future__ import annotations
 import abc
 import contextlib
 import sys
+import threading
 import warnings
 
 import equinox as eqx
@@ -85,8 +86,9 @@ def _user_call():
     return level, (id(frame), frame.f_lasti, frame.f_lineno)
 
 
-#: Nesting depth of `jumps_located` blocks being traced.
-_LOCATED = [0]
+#: Nesting depth of `jumps_located` blocks being traced, per thread (`identify` fits two
+#: laws in two threads: one's event-mode outputs must not silence the other's warning).
+_LOCATED = threading.local()
 
 
 @contextlib.contextmanager
@@ -95,11 +97,11 @@ def jumps_located():
     whose contact entries and exits were located (the event mode's outputs at its save
     times): its derivative there, zero on each side of a jump, misses no jump term, so
     differentiating it does not warn."""
-    _LOCATED[0] += 1
+    _LOCATED.depth = getattr(_LOCATED, "depth", 0) + 1
     try:
         yield
     finally:
-        _LOCATED[0] -= 1
+        _LOCATED.depth -= 1
 
 
 @_warn_if_differentiated.defjvp
@@ -107,7 +109,7 @@ def _warn_if_differentiated_jvp(primals, tangents):
     # JAX traces the rule once per use of the switch in a traced program (both walls, the
     # solver's first and later steps): one warning per differentiating call, attributed
     # to the user's line, whatever the warnings filter.
-    if _LOCATED[0]:
+    if getattr(_LOCATED, "depth", 0):
         return primals[0], tangents[0]
     level, key = _user_call()
     if key is None or key != _LAST_WARNED[0]:

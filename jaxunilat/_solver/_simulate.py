@@ -287,7 +287,9 @@ def _diffrax_checks_off():
     switches that value to "off" while the solve is traced, and only when it is the
     default "raise" (a user debugging with `EQX_ON_ERROR=breakpoint` keeps it). An
     equinox that keeps the setting elsewhere is left alone: the checks then stay, and
-    the cache calls such a program plainly (`internal._executables`).
+    the cache calls such a program plainly (`internal._executables`). The setting is
+    process-wide: solves traced in other threads wait for the lock, but an `error_if`
+    traced by other code in another thread during those milliseconds is also off.
     """
     module = sys.modules.get("equinox._errors")
     if getattr(module, "EQX_ON_ERROR", None) != "raise":

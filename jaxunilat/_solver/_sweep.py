@@ -125,12 +125,13 @@ def _batch_size(args, axes) -> int:
     return n
 
 
-def _pad(leaf, n_pad: int):
-    """Repeat the last row n_pad times (the padded rows are valid inputs, then dropped)."""
+def _pad(leaf, n_pad: int, xp=jnp):
+    """Repeat the last row n_pad times (the padded rows are valid inputs, then dropped);
+    `xp`: the array module (jax.numpy, or NumPy for a host copy)."""
     if n_pad == 0:
         return leaf
-    leaf = jnp.asarray(leaf)
-    return jnp.concatenate([leaf, jnp.repeat(leaf[-1:], n_pad, axis=0)], axis=0)
+    leaf = xp.asarray(leaf)
+    return xp.concatenate([leaf, xp.repeat(leaf[-1:], n_pad, axis=0)], axis=0)
 
 
 def _gather(out):
@@ -161,9 +162,7 @@ def _place(leaf, sharding, n_pad: int | None):
     host_array = isinstance(leaf, np.ndarray) or (isinstance(leaf, jax.Array) and leaf.is_fully_addressable)
     if sharding.is_fully_addressable or not host_array:
         return jax.device_put(jnp.asarray(leaf) if n_pad is None else _pad(leaf, n_pad), sharding)
-    host = np.asarray(leaf)
-    if n_pad:
-        host = np.concatenate([host, np.repeat(host[-1:], n_pad, axis=0)], axis=0)
+    host = np.asarray(leaf) if n_pad is None else _pad(np.asarray(leaf), n_pad, np)
     return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
 
 
