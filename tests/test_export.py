@@ -13,7 +13,7 @@ import pytest
 
 import identify
 import jaxunilat as ju
-from identify._export import nonadhesive_rebound
+from identify._apply._export import nonadhesive_rebound
 from jaxunilat._cli._main import main
 
 KAPPA, K_R, MASS = 1e4, 0.2, 2.7e-3

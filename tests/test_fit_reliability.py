@@ -135,14 +135,17 @@ def test_more_free_parameters_than_rows_is_refused():
 def test_holdout_under_an_infinite_uncertainty_cannot_judge():
     from types import SimpleNamespace
 
-    from identify._robust import Rows
-    from identify._summary import _holdout
+    from identify._fit._robust import Rows
+    from identify._report._summary import _holdout
 
     d = identify.load_dataset(TRACE)
     rows = Rows.make([10], 0.3)
     setup = SimpleNamespace(datasets=[d], per_row=lambda s: np.full(10, 5e-4), sigmas=np.array([5e-4]))
     cov = np.array([[np.inf, 0.0], [0.0, 1e-4]])
-    h = _holdout(setup, rows, np.zeros(10), np.ones((10, 2)), cov, 1.0, np.zeros(10), 0.3, False)
+    h = _holdout(
+        setup, rows, r_fit=np.zeros(10), jac=np.ones((10, 2)), cov=cov, s2=1.0, data_units=np.zeros(10),
+        fraction=0.3, scatter_model=False,
+    )  # fmt: skip
     assert h["within_noise"] is None and "cannot judge" in h["reason"]
 
 
@@ -165,20 +168,18 @@ def test_profile_ends_are_stated_in_words(trace_fit):
 
 
 def test_profile_below_the_fit_means_not_converged(monkeypatch):
-    import identify._fit as fitmod
+    import identify._fit._stages as stages
 
-    original = fitmod._final_pass
+    original = stages.final_pass
 
     def off_minimum(setup, best, rows, opts):
         point = original(setup, best, rows, opts)
         z = point.z.copy()
         z[0] += 0.1  # log κ 10% off the optimum (~6 standard errors)
-        prior, setup.evaluator.prior = setup.evaluator.prior, False
-        r, jac, _ = setup.evaluator(z)
-        setup.evaluator.prior = prior
+        r, jac, _ = setup.evaluator.with_(prior=False)(z)
         return dataclasses.replace(point, z=z, r=r, jac=jac, cost=0.5 * float(np.sum(r**2)))
 
-    monkeypatch.setattr(fitmod, "_final_pass", off_minimum)
+    monkeypatch.setattr(stages, "final_pass", off_minimum)
     result = identify.fit(TRACE, starts=1, profile=True)
     assert not result.converged and "not at its minimum" in result.report()
     assert not any(result.identifiable.values())

@@ -16,7 +16,7 @@ import pytest
 from throws import throw
 
 import identify
-from identify._plausible import closed_form, contradictions
+from identify._fit._plausible import closed_form, contradictions
 
 MASS = 0.04
 

@@ -112,7 +112,7 @@ def _zeta() -> float:
 def test_goodness_of_fit_p_value_matches_scipy(chi2, n, p):
     from scipy.stats import chi2 as chi2_dist
 
-    from identify._uncertainty import goodness_of_fit
+    from identify._fit._uncertainty import goodness_of_fit
 
     g = goodness_of_fit(chi2, n, p, sigma_known=True)
     assert g["dof"] == n - p
@@ -155,15 +155,14 @@ def test_offset_column_is_closed_form_and_takes_no_runs(reference):
     Checked against a central difference of residuals from explicit runs at offset ± h,
     and the κ, k_r columns still come from 2 runs each (5 runs per call, not 7).
     """
-    from identify._problem import PARAMETERS, evaluate_rows, to_z
-    from identify._setup import build
+    from identify._fit._problem import PARAMETERS, evaluate_rows, to_z
+    from identify._fit._setup import build
 
     data = _impacts(reference, seed=7, n=8)
     setup = build(
         [data], law="kelvin-voigt", nuisance=("offset",), freeze=(), initial={}, bounds={}, tol=1e-10
     )
-    evaluator = setup.evaluator
-    evaluator.prior = False
+    evaluator = setup.evaluator.with_(prior=False)
     problem = setup.evaluator.groups[0].problem
     z = to_z(dict(kappa=TRUE["kappa"], k_r=TRUE["k_r"], drag=DRAG, x0=X0, v0=0.0, offset=OFFSET))
     assert evaluator.free == [PARAMETERS.index(n) for n in ("kappa", "k_r", "offset")]

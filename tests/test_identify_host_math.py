@@ -1,6 +1,6 @@
 """identify's host-side math: closed forms that compile nothing, and a fit that compiles once.
 
-The Kelvin–Voigt closed forms in `identify._kelvin_voigt` are checked against the
+The Kelvin–Voigt closed forms in `identify._fit._kelvin_voigt` are checked against the
 independent formulas of tests/reference.py and central differences; a cold fit in a
 fresh process must compile nothing but its one evaluator (eager `jax.numpy` on the host
 compiled ~120 small programs, ~1.4 s of a 6 s fit).
@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from reference import kelvin_voigt_contact_time, kelvin_voigt_restitution
 
-from identify._kelvin_voigt import parameters_from_restitution, restitution_and_contact_time
+from identify._fit._kelvin_voigt import parameters_from_restitution, restitution_and_contact_time
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
@@ -110,7 +110,7 @@ class _LinearEvaluator:
 
 @pytest.mark.parametrize("correlation", [0.0, 0.999999])
 def test_levenberg_marquardt_reaches_least_squares_and_stops_without_noise_trials(correlation):
-    from identify._fit import _levenberg_marquardt
+    from identify._fit._lm import levenberg_marquardt
 
     rng = np.random.default_rng(3)
     x = rng.standard_normal(200)
@@ -119,9 +119,8 @@ def test_levenberg_marquardt_reaches_least_squares_and_stops_without_noise_trial
     b = m @ np.array([2.0, -1.0]) + 0.1 * rng.standard_normal(200)
     evaluator = _LinearEvaluator(m, b)
     big = np.full(2, 1e9)
-    z, r, _, cost, iterations, converged, why = _levenberg_marquardt(
-        evaluator, np.zeros(2), [0, 1], np.ones(200), -big, big, max_iterations=60
-    )
+    out = levenberg_marquardt(evaluator, np.zeros(2), [0, 1], np.ones(200), -big, big, max_iterations=60)
+    z, cost, iterations, converged, why = out.z, out.cost, out.iterations, out.converged, out.why
     expected = np.linalg.lstsq(m, b, rcond=None)[0]
     assert converged
     # Reduced χ² ~ 0.01, dchi2 = 1e-6 of it: the estimate is within ~1e-3 standard errors.

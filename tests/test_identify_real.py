@@ -214,23 +214,24 @@ def test_forward_mode_gradient_stage_matches_central_differences(kv_drops):
     import jax.numpy as jnp
     import optax
 
-    from identify._fit import _gradient_step, _weights
-    from identify._robust import Rows
-    from identify._setup import build, start_point
+    from identify._fit._gradient import gradient_step
+    from identify._fit._robust import Rows
+    from identify._fit._setup import build, start_point
+    from identify._fit._stages import row_weights
 
     t = kv_drops[0.20][:8] + 0.03
     setup = build([_impacts(t, 0.20)], law="kelvin-voigt", nuisance=("offset",), freeze=(), initial={},
                   bounds={}, tol=1e-10)  # fmt: skip
+    setup = setup.with_evaluator(prior=False)
     ev = setup.evaluator
-    ev.prior = False
     rows = Rows.make(setup.n_rows, 0.0)
     z = start_point(setup, 0.96, 1.1e-3)
     z[5] = 0.0302
     sgd = optax.sgd(1.0)
-    step = _gradient_step(sgd, "forward")
+    step = gradient_step(sgd, "forward")
     group = ev.groups[0]
     problem = dataclasses.replace(group.problem, autodiff="forward")
-    w = jnp.asarray(_weights(setup, rows)[None, :])
+    w = jnp.asarray(row_weights(setup, rows)[None, :])
     index = jnp.asarray(setup.layout.index[group.files])
     mask = jnp.asarray([True, True, False, False, False, True])
     z_new, _, value = step([problem], [index], [w], jnp.asarray(z), sgd.init(jnp.asarray(z)), mask)
@@ -258,7 +259,7 @@ def test_forward_mode_gradient_stage_matches_central_differences(kv_drops):
     ],
 )
 def test_unit_slips_are_noted(fields, pattern):
-    from identify._data import plausibility_notes
+    from identify._data._format import plausibility_notes
 
     base = dict(scene="drop", observe="impacts", mass=MASS, drag=DRAG, x0=0.3, v0=0.0, noise=NOISE)
     base.setdefault("t", np.array([0.25, 0.68, 1.09]))

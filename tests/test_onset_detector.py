@@ -14,7 +14,7 @@ import pytest
 from synthetic_audio import recording, write_wav
 
 from identify import ImplausibleRecording, detect_onsets, import_wav
-from identify._import_audio import rise_ratio, select_chain
+from identify._data._import_audio import rise_ratio, select_chain
 
 TOL = 0.3e-3  # s
 

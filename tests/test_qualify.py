@@ -15,7 +15,7 @@ from reference import FREE, BallParams, scipy_reference
 from scipy.optimize import brentq
 
 import jaxunilat
-from identify._qualify import qualify, qualify_fit, rebound_height, verdict
+from identify._apply._qualify import qualify, qualify_fit, rebound_height, verdict
 from jaxunilat._cli._main import main
 
 M = 2.7e-3

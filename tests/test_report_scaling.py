@@ -21,7 +21,7 @@ import pytest
 from reference import BallParams, scipy_reference
 
 import identify
-from identify._joint import Layout
+from identify._fit._joint import Layout
 
 KAPPA, K_R, MASS, DRAG, NOISE = 1.6e4, 0.15, 2.7e-3, 0.12, 2e-5
 FILE_FIELDS = {"name", "rows", "x0", "v0", "offset", "e_alone", "rms", "outliers", "held_out"}
@@ -206,7 +206,7 @@ def test_unidentifiable_parameters_print_what_the_data_bound(one):
     ],
 )
 def test_bound_rule(name, value, ci95, kind):
-    from identify._result import bound
+    from identify._report._result import bound
 
     b = bound(name, {"value": value, "ci95": ci95})
     assert b["kind"] == kind
@@ -226,7 +226,7 @@ def _overlap(a, b) -> float:
 def test_plot_fit_keeps_legends_off_the_data_and_panels_tall(results, n):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    fig = identify.plot_fit(results[n])
+    fig = identify.plot.plot_fit(results[n])
     FigureCanvasAgg(fig)
     fig.canvas.draw()
     data_axes = [ax for ax in fig.axes if ax.get_label() != "<colorbar>"]
@@ -248,4 +248,4 @@ def test_plot_fit_keeps_legends_off_the_data_and_panels_tall(results, n):
     outliers = [ln for ln in residuals.lines if ln.get_marker() in ("x", "^", "v") and ln.get_color() == "C3"]
     assert bool(held) == (n > 1) and bool(outliers) == (n > 1)
     # Beyond MANY_FILES, a colour bar stands for the legend of file names.
-    assert (len(fig.axes) == 3) == (n > identify._plot.MANY_FILES)
+    assert (len(fig.axes) == 3) == (n > identify._report._plot.MANY_FILES)

@@ -181,7 +181,7 @@ def test_plot_restitution_draws_points_and_curves():
         "Kelvin-Voigt": (speeds, np.full_like(speeds, 0.85)),
         "Hunt-Crossley": (speeds, 1.0 - 0.03 * speeds),
     }
-    fig = identify.plot_restitution({"drop 1": a, "drop 2": b}, laws, title="restitution")
+    fig = identify.plot.plot_restitution({"drop 1": a, "drop 2": b}, laws, title="restitution")
     (ax,) = fig.axes
     assert len(ax.get_lines()) == 4
     assert "m/s" in ax.get_xlabel() and ax.get_ylabel()
@@ -191,7 +191,7 @@ def test_plot_restitution_draws_points_and_curves():
     from matplotlib.figure import Figure
 
     target = Figure().add_subplot()
-    assert identify.plot_restitution(a, ax=target) is target.figure
+    assert identify.plot.plot_restitution(a, ax=target) is target.figure
     assert len(target.get_lines()) == 1
     with pytest.raises(ValueError, match="laws"):
-        identify.plot_restitution(a, {"bad": (speeds, speeds[:3])})
+        identify.plot.plot_restitution(a, {"bad": (speeds, speeds[:3])})

@@ -179,6 +179,7 @@ class RatioResiduals:
 
 def noise_statement(
     d_observe: str,
+    *,
     sigma_known: bool,
     stated,
     scatter: float,

@@ -8,79 +8,22 @@ own entries, rows, outliers, missed bounces and residual scatter go to `datasets
 
 from __future__ import annotations
 
-import functools
 import math
 import os
 
 import jax
 import numpy as np
 
-from ._data import plausibility_notes
-from ._joint import contact_time_of
-from ._kelvin_voigt import restitution_and_contact_time
-from ._problem import PARAMETERS
+from .._data._format import plausibility_notes
+from .._fit._alone import alone_restitution
+from .._fit._derived import law_derived, view
+from .._fit._problem import PARAMETERS
+from .._fit._robust import missed_bounces, noise_statement, scatter_statement
+from .._fit._uncertainty import covariance, goodness_of_fit, summarize
 from ._result import FitResult
-from ._robust import missed_bounces, noise_statement, scatter_statement
-from ._uncertainty import covariance, goodness_of_fit, summarize
 
 
-def view(setup, z: np.ndarray, cov: np.ndarray, f: int = 0):
-    """File f's 6-vector, the covariance of its free entries, and their indices in PARAMETERS."""
-    idx = setup.layout.index[f]
-    free6 = [i for i in range(len(PARAMETERS)) if idx[i] in setup.free]
-    pos = [setup.free.index(idx[i]) for i in free6]
-    return np.asarray(z)[idx], cov[np.ix_(pos, pos)], free6
-
-
-def law_derived(setup):
-    """(log κ, log k_r, mass) → (e, t_c, ∂e/∂u, ∂log t_c/∂u) for the fit's law.
-
-    Kelvin–Voigt: the closed forms (no gravity). Hunt–Crossley: e of one impact at the
-    data's typical impact speed (simulated as in `law_restitution`; gradient by central
-    differences, step 1e-4 in the logs) and the undamped Hertz contact time there.
-    """
-    if setup.law == "kelvin-voigt":
-        return restitution_and_contact_time
-    speed, g = setup.speed, float(setup.datasets[0].gravity)
-
-    def derived(lk, lr, mass):
-        e, ge = _hunt_crossley_restitution(float(lk), float(lr), float(mass), speed, g)
-        t_c = contact_time_of("hunt-crossley", lk, lr, mass, speed)
-        return e, t_c, ge.copy(), np.array([-1.0 / 2.5, 0.0])
-
-    return derived
-
-
-#: Central-difference step (in log κ, log k_r) of Hunt–Crossley's ∂e/∂(log κ, log k_r).
-_E_STEP = 1e-4
-
-
-@functools.lru_cache(maxsize=256)
-def _hunt_crossley_restitution(lk: float, lr: float, mass: float, speed: float, gravity: float):
-    """Hunt–Crossley's e at `speed` (m/s) and its gradient in (log κ, log k_r).
-
-    The point and its four neighbours are one batch of simulated impacts
-    (`law_restitution`'s program, rtol 1e-12). Cached: the files of a joint fit share κ,
-    k_r and usually the mass, and every file's table asks for the same values.
-    """
-    from ._restitution import _impact_rows
-
-    h = _E_STEP
-    lks = lk + np.array([0.0, h, -h, 0.0, 0.0])
-    lrs = lr + np.array([0.0, 0.0, 0.0, h, -h])
-    e, _ = _impact_rows("hunt-crossley", np.exp(lks), np.exp(lrs), np.full(5, speed), mass, gravity, 1e-12)
-    e = np.asarray(e, dtype=float)
-    return float(e[0]), np.array([(e[1] - e[2]) / (2 * h), (e[3] - e[4]) / (2 * h)])
-
-
-def derived_quantities(setup, z: np.ndarray, cov: np.ndarray, f: int = 0) -> dict:
-    """The derived e and t_c entries of file f's view (see `summarize`)."""
-    z6, cov6, free6 = view(setup, z, cov, f)
-    mass = float(setup.datasets[f].mass)
-    return summarize(z6, cov6, free6, mass, derived=law_derived(setup))[1]
-
-
-def _file_entries(setup, z, cov, rows, r_data, sigma_used, best_alone):
+def _file_entries(setup, z, cov, rows, *, r_data, sigma_used, best_alone):
     """One dict per file: its rows, outliers, missed bounces, scatter and own entries."""
     out = []
     for f, d in enumerate(setup.datasets):
@@ -129,8 +72,6 @@ def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale, onset
     themselves; under the restitution-scatter error model it is the point's onset
     residuals, and `best` holds the log-ratio rows that were fitted.
     """
-    from ._fit import alone_restitution  # the per-file refit uses the fit's stages
-
     n = sum(setup.n_rows)
     r_fit, jac = best.r[:n], best.jac[:n]
     r_data = (onsets or best).r[:n]
@@ -154,9 +95,9 @@ def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale, onset
     else:
         sigma_used = setup.sigmas * math.sqrt(s2)
         noise = noise_statement(
-            d0.observe, setup.sigma_known, float(setup.sigmas[0]),
-            onset_scatter if setup.sigma_known else float(sigma_used[0]), goodness, setup.times[0],
-            height=_height(setup),
+            d0.observe, sigma_known=setup.sigma_known, stated=float(setup.sigmas[0]),
+            scatter=onset_scatter if setup.sigma_known else float(sigma_used[0]), goodness=goodness,
+            times=setup.times[0], height=_height(setup),
         )  # fmt: skip
     at_bound = [
         "/".join(str(x) for x in setup.layout.names()[j] if x is not None)
@@ -173,7 +114,10 @@ def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale, onset
     residuals = r_data * row_sigma  # prediction − data, in the data's units
     holdout = None
     if opts.holdout > 0:
-        holdout = _holdout(setup, rows, r_fit, jac, cov, s2, residuals, opts.holdout, scatter_model)
+        holdout = _holdout(
+            setup, rows, r_fit=r_fit, jac=jac, cov=cov, s2=s2, data_units=residuals, fraction=opts.holdout,
+            scatter_model=scatter_model,
+        )  # fmt: skip
     chi2 = float(np.sum(r_fit[keep] ** 2))
     return FitResult(
         data=d0,
@@ -202,7 +146,9 @@ def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale, onset
         simulations=setup.evaluator.calls,
         wall_s=0.0,
         law=setup.law,
-        datasets=_file_entries(setup, best.z, cov, rows, r_data, sigma_used, alone),
+        datasets=_file_entries(
+            setup, best.z, cov, rows, r_data=r_data, sigma_used=sigma_used, best_alone=alone
+        ),
         used=rows.fitted.copy(),
         noise=noise,
         holdout=holdout,
@@ -220,17 +166,17 @@ def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale, onset
 
 def _height(setup) -> float | None:
     """The smallest height scale of the files (`height_scale`), None where none has one."""
-    from ._robust import height_scale
+    from .._fit._robust import height_scale
 
     scales = [h for h in (height_scale(d) for d in setup.datasets) if h is not None]
     return min(scales) if scales else None
 
 
-def _holdout(setup, rows, r_fit, jac, cov, s2, data_units, fraction, scatter_model) -> dict:
+def _holdout(setup, rows, *, r_fit, jac, cov, s2, data_units, fraction, scatter_model) -> dict:
     """The held-out rows: prediction errors in data units, judged against the noise plus
     the fitted parameters' uncertainty in the rows the fit used (onsets, or log ratios
     under the restitution-scatter model)."""
-    from ._robust import holdout_summary
+    from .._fit._robust import holdout_summary
 
     if not np.all(np.isfinite(cov)):
         # A parameter the fit leaves unbounded propagates an unbounded prediction band:
@@ -260,7 +206,7 @@ def bounce_points(result) -> list[tuple[str, object]]:
     of a drop from rest also gets its first bounce from the fitted release height.
     **Returns:** `(label, BounceRestitution)` pairs, one per segment of ≥ 3 onsets.
     """
-    from ._restitution import bounce_restitution
+    from .._fit._restitution import bounce_restitution
 
     drag = result.parameters["drag"]["value"] if result.data.drag > 0 or "drag" in result.free else 0.0
     t_c = result.derived["contact_time"]["value"]

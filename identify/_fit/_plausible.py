@@ -58,7 +58,7 @@ class ClosedForm:
 def closed_form(d) -> ClosedForm | None:
     """The closed-form restitution of an impacts data set `d` of a drop; None where the
     file has no closed form (another observation or scene, too few onsets)."""
-    from ._import import ratio_chain
+    from .._data._import import ratio_chain
     from ._restitution import bounce_restitution
 
     if d.observe != "impacts" or d.scene != "drop" or len(d.t) < MIN_ONSETS:

@@ -2,7 +2,7 @@
 
 One or several data sets are fitted together (`Layout`): κ, k_r (and the drag, when
 fitted) are shared; each file keeps its own release height x0, release speed v0 and
-clock offset. The start is the closed form of `identify._initial` (e from successive
+clock offset. The start is the closed form of `identify._fit._initial` (e from successive
 rebound heights or flight times, t_c from the 0.5–2 ms prior, then (κ, k_r) from the
 law's inverse), per file for its nuisance values and from the median over files for
 the shared e.
@@ -67,6 +67,10 @@ class Setup:
     @property
     def n_rows(self) -> list[int]:
         return [len(t) for t in self.times]
+
+    def with_evaluator(self, **changes) -> Setup:
+        """This set-up with its evaluator's fields changed (`JointEvaluator.with_`)."""
+        return dataclasses.replace(self, evaluator=self.evaluator.with_(**changes))
 
     def per_row(self, values) -> np.ndarray:
         """One value per file (e.g. `sigmas`) repeated over that file's data rows."""
@@ -142,7 +146,9 @@ def build(datasets, *, law, nuisance, freeze, initial, bounds, tol) -> Setup:
     per_file = [_file_values(d, initial, nuisance) for d in datasets]
     rows = [d.num_rows for d in datasets]
     shift_trace = "offset" in nuisance
-    problems = _padded_problems(datasets, per_file, rows, law, has_drag, sigmas, tol, shift_trace)
+    problems = _padded_problems(
+        datasets, per_file, rows, law=law, has_drag=has_drag, sigmas=sigmas, tol=tol, shift_trace=shift_trace
+    )
     free = [
         j
         for j, (name, _) in enumerate(layout.names())
@@ -200,7 +206,7 @@ def _e_source(datasets) -> str:
     return "closed form (" + ", ".join(what) + ")" + median
 
 
-def _padded_problems(datasets, per_file, rows, law, has_drag, sigmas, tol, shift_trace):
+def _padded_problems(datasets, per_file, rows, *, law, has_drag, sigmas, tol, shift_trace):
     """One Problem per file, padded so that files of one structure stack."""
     keys = [(d.scene, d.observe) for d in datasets]
     longest = {k: max(r for r, kk in zip(rows, keys, strict=True) if kk == k) for k in set(keys)}

@@ -123,7 +123,7 @@ def _style_legend(
 
 def law_curves(result, speeds) -> dict:
     """e(v) of the fitted law (and, after `law="auto"`, of the other law) at `speeds` (m/s)."""
-    from ._restitution import law_restitution
+    from .._fit._restitution import law_restitution
 
     d = result.data
     laws = (
@@ -354,7 +354,7 @@ def _residual_panel(ax, result, key: _Key, *, scale: float, unit: str, xlabel: s
 
 
 def _title(result) -> str:
-    from ._problem import units
+    from .._fit._problem import units
 
     kappa, k_r = result.parameters["kappa"], result.parameters["k_r"]
     e = result.derived["restitution"]

@@ -14,7 +14,7 @@ heights (the standard error is their standard deviation).
   the fit's standard errors (relative: sd(log κ) = stderr(κ)/κ) and correlation.
 - When only the restitution is identified (apex heights; `identifiable.kappa` false),
   e is drawn from N(e, stderr(e)²) and the contact time t_c log-uniformly from the
-  0.5–2 ms prior (`identify._initial.CONTACT_TIME_PRIOR`), and (κ, k_r) follow from the
+  0.5–2 ms prior (`identify._fit._initial.CONTACT_TIME_PRIOR`), and (κ, k_r) follow from the
   inverse Kelvin–Voigt map at the fit's mass. The rebound height depends on t_c only
   through gravity and drag acting during the ~1 ms contact: `tc_sensitivity` reports the
   height change across the prior (about 0.2 mm for the ITTF test, small against the
@@ -44,7 +44,7 @@ ITTF_MAX = 0.260
 DEFAULT_DRAG = 0.12
 DEFAULT_GRAVITY = 9.81
 DEFAULT_SAMPLES = 1000
-#: The contact-time prior used when κ is not identified, s (as `identify._initial.CONTACT_TIME_PRIOR`).
+#: The contact-time prior used when κ is not identified, s (as `identify._fit._initial.CONTACT_TIME_PRIOR`).
 CONTACT_TIME_PRIOR = (0.5e-3, 2.0e-3)
 VERDICTS = ("PASS", "FAIL", "INCONCLUSIVE")
 

@@ -15,7 +15,7 @@ import os
 
 import numpy as np
 
-from ._data import DEFAULT_GRAVITY, Dataset, _parse, format_dataset, write_text
+from ._format import DEFAULT_GRAVITY, Dataset, _parse, format_dataset, write_text
 
 #: An ITTF 40 mm table-tennis ball, kg.
 DEFAULT_MASS = 2.7e-3
@@ -322,28 +322,6 @@ def interval_warnings(times: np.ndarray, fit: IntervalFit | None, lines=None) ->
 def ratio_ok(r: float) -> bool:
     """Whether a successive-interval ratio I[k+1]/I[k] is one a bouncing ball can have."""
     return RATIO_RANGE[0] <= r <= RATIO_RANGE[1]
-
-
-def plot_intervals(ax, times: np.ndarray, *, smooth_label: str, outlier_label: str) -> None:
-    """Onset intervals (ms) against their start (s), the smooth decay fitted to them, and
-    the intervals that break it (squares) on a matplotlib `ax`."""
-    ax.plot(times[:-1], np.diff(times) * 1e3, "o", ms=4, color="C0", label="intervals")
-    fit = fit_intervals(times)
-    if fit is not None:
-        ax.plot(fit.start, fit.expected * 1e3, "-", color="C1", lw=1, label=smooth_label)
-        out = ~fit.inlier
-        if out.any():
-            ax.plot(
-                fit.start[out],
-                fit.interval[out] * 1e3,
-                "s",
-                mfc="none",
-                color="C3",
-                ms=9,
-                label=outlier_label,
-            )
-    ax.legend(loc="upper right", fontsize=8)
-    ax.set_ylabel("interval [ms]")
 
 
 # -- the plausibility gate ------------------------------------------------------------------

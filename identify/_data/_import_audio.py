@@ -37,7 +37,7 @@ import struct
 
 import numpy as np
 
-from ._data import read_bytes
+from ._format import read_bytes
 from ._import import (
     MAX_SPAN,
     RESTITUTION_RANGE,
@@ -49,7 +49,6 @@ from ._import import (
     gate,
     impacts_dataset,
     interval_warnings,
-    plot_intervals,
     ratio_chain,
 )
 
@@ -939,47 +938,3 @@ def second_sequence(det: OnsetDetection) -> list[str]:
         f"start at t = {', '.join(f'{t:.3f}' for t in starts)} s: cut the recording before each restart and "
         "import each drop alone), or clicks that are not one ball"
     ]
-
-
-def plot_detection(result: ImportResult, *, samples=None, title: str | None = None):
-    """A figure of a WAV import: the envelope with accepted onsets (green) and rejected
-    clicks (red crosses), and the interval sequence with its smooth fit.
-
-    `samples`: the recording's mono samples (default: read again from `result.source`).
-    **Returns:** a `matplotlib.figure.Figure`.
-    """
-    from matplotlib.figure import Figure
-
-    det = result.detection
-    if samples is None:
-        samples = read_wav(result.source).samples
-    env = envelope(samples, det.rate)
-    fig = Figure(figsize=(10.0, 6.0), layout="constrained")
-    top, bottom = fig.subplots(2, 1, height_ratios=(3, 2))
-    bins = max(1, len(env) // 4000)
-    m = len(env) // bins * bins
-    peaks = env[:m].reshape(-1, bins).max(axis=1)
-    t = (np.arange(len(peaks)) * bins + bins / 2) / det.rate
-    top.plot(t, peaks, lw=0.6, color="0.4", label="envelope (high-passed magnitude)")
-    top.axhline(det.settings["threshold"] * det.noise_floor, color="C1", lw=0.8, ls="--", label="threshold")
-    ok = det.accepted
-    top.plot(det.onset[ok], det.peak[ok], "v", color="C2", ms=6, label=f"accepted onsets ({ok.sum()})")
-    for when in det.onset[ok]:
-        top.axvline(when, color="C2", lw=0.5, alpha=0.5)
-    if (~ok).any():
-        top.plot(
-            det.onset[~ok], det.peak[~ok], "x", color="C3", ms=9, mew=2, label=f"rejected ({(~ok).sum()})"
-        )
-    top.set_yscale("log")
-    top.set_ylim(max(det.noise_floor * 0.5, 1e-6), None)
-    top.set_xlabel("t [s] (recording clock)")
-    top.set_ylabel("envelope [full scale]")
-    top.legend(loc="upper right", fontsize=8)
-    onsets = det.onsets
-    if len(onsets) >= 2:
-        plot_intervals(bottom, onsets, smooth_label="smooth fit", outlier_label="breaks the decay")
-    bottom.set_xlabel("interval start [s]")
-    top.set_title(title or f"{os.path.basename(result.source)}: {len(onsets)} onsets", fontsize=10)
-    for ax in (top, bottom):
-        ax.grid(True, alpha=0.3)
-    return fig

@@ -19,7 +19,7 @@ import re
 
 import numpy as np
 
-from ._data import DEFAULT_GRAVITY, read_bytes
+from ._format import DEFAULT_GRAVITY, read_bytes
 from ._import import (
     ImportResult,
     Rejected,
@@ -29,7 +29,6 @@ from ._import import (
     gate,
     impacts_dataset,
     interval_warnings,
-    plot_intervals,
     ratio_chain,
     trailing_breaks,
 )
@@ -233,7 +232,19 @@ def _build(name, unit, split, *, sep=None, decimal=".", kind="CSV") -> Table:
                 if any(c is not None and str(c).strip() for c in cs)
             ]
             break
-        raise ValueError(_row_problem(name, unit, n, cells, values, columns, header_line, sep, decimal))
+        raise ValueError(
+            _row_problem(
+                name,
+                unit,
+                n,
+                cells,
+                values,
+                columns=columns,
+                header_line=header_line,
+                sep=sep,
+                decimal=decimal,
+            )
+        )
     if not rows:
         raise ValueError(f"{name}: {unit} {header_line}: no numeric data rows after the header")
     return Table(
@@ -271,7 +282,7 @@ def _split_decimals(cells, columns: int) -> bool:
     return len(filled) >= max(2, columns + 1) and all(re.fullmatch(r"[+-]?\d+", c) for c in filled)
 
 
-def _row_problem(name, unit, n, cells, values, columns, header_line, sep, decimal) -> str:
+def _row_problem(name, unit, n, cells, values, *, columns, header_line, sep, decimal) -> str:
     where = f"{name}: {unit} {n}"
     if len(values) != len(columns):
         cause = ""
@@ -1068,28 +1079,3 @@ def _video_rows(
     if len(t) < 3:
         raise ValueError(f"{table.at(table.header_line)}: {len(t)} usable rows; a trace needs at least 3")
     return np.asarray(t), np.asarray(x), lines
-
-
-def plot_table_import(result: ImportResult, *, title: str | None = None):
-    """A figure of a phyphox import (intervals against onset time, with the smooth decay
-    and the suspicious intervals) or a video import (x against t).
-
-    **Returns:** a `matplotlib.figure.Figure`.
-    """
-    from matplotlib.figure import Figure
-
-    ds = result.dataset
-    fig = Figure(figsize=(9.0, 5.0), layout="constrained")
-    ax = fig.subplots()
-    if ds.observe == "trace":
-        ax.plot(ds.t, ds.x * 1e3, ".", ms=3, color="C0")
-        ax.set_xlabel("t [s] (0 = first tracked frame)")
-        ax.set_ylabel("x [mm]")
-    else:
-        plot_intervals(
-            ax, np.asarray(ds.t), smooth_label="smooth decay", outlier_label="breaks the decay (kept)"
-        )
-        ax.set_xlabel("interval start [s] (recording clock)")
-    ax.grid(True, alpha=0.3)
-    ax.set_title(title or f"{os.path.basename(result.source)}: {ds.num_rows} rows", fontsize=10)
-    return fig

@@ -12,7 +12,7 @@ import numpy as np
 
 import jaxunilat as ju
 
-from ._problem import LOG_PARAMETERS, PARAMETERS, from_z, units
+from .._fit._problem import LOG_PARAMETERS, PARAMETERS, from_z, units
 
 #: A 95% interval whose ends lie more than this many decades apart bounds nothing useful.
 SPAN_DECADES = 3.0
@@ -333,7 +333,7 @@ class FitResult:
     def _per_file_values(self, n_files: int) -> list[dict]:
         """Each file's x0, v0 and offset as used by the fit (fitted or held), SI units."""
         if self.joint_z is not None:
-            from ._joint import Layout
+            from .._fit._joint import Layout
 
             z = np.asarray(self.joint_z, dtype=float)
             layout = Layout(n_files=n_files)

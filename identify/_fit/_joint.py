@@ -116,18 +116,28 @@ def make_groups(problems: list[Problem], rows: list[int]) -> list[Group]:
 
 
 @dataclasses.dataclass
+class CallCount:
+    """Compiled calls made, shared by an evaluator and every evaluator derived from it."""
+
+    n: int = 0
+
+
+@dataclasses.dataclass(frozen=True)
 class JointEvaluator:
     """r and J of every file at a joint point: one compiled call per group.
 
     **Fields:** the `groups`, the `layout`, the `free` joint indices (the Jacobian's
     columns, in this order), the finite-difference `steps` per joint entry, the files'
     `masses`, the `prior` switch and law (the steering prior on log t_c, one row per
-    distinct κ/k_r pair), and `calls` (compiled calls made).
+    distinct κ/k_r pair), and `counter` (compiled calls made: `calls`).
 
     Residual rows are every file's real observations in file order, then the prior's
     rows when `prior` is on. `transforms` maps a file to a host-side map
     (r, J) → (r′, J′) of its rows (the restitution-scatter error model of impact onsets,
-    `identify._robust.RatioResiduals`); it changes what is fitted, not what is compiled.
+    `identify._fit._robust.RatioResiduals`); it changes what is fitted, not what is compiled.
+
+    Frozen: a stage that fits other rows (without the prior, or with the log-ratio
+    rows) derives its own evaluator with `with_`; the derived ones share the call count.
     """
 
     groups: list[Group]
@@ -139,8 +149,17 @@ class JointEvaluator:
     law: str = "kelvin-voigt"
     prior: bool = True
     speed: float = 1.0
-    calls: int = 0
     transforms: dict = dataclasses.field(default_factory=dict)
+    counter: CallCount = dataclasses.field(default_factory=CallCount)
+
+    @property
+    def calls(self) -> int:
+        """Compiled calls made by this evaluator and every one derived from it."""
+        return self.counter.n
+
+    def with_(self, **changes) -> JointEvaluator:
+        """This evaluator with `changes` to its fields (e.g. `prior=False`), sharing its call count."""
+        return dataclasses.replace(self, **changes)
 
     def _file_columns(self, f: int) -> tuple[list[int], list[int]]:
         """Free joint entries file f depends on: (differenced, shifts)."""
@@ -201,7 +220,7 @@ class JointEvaluator:
             r, ok = np.asarray(r), np.asarray(ok)
             for k, f in enumerate(g.files):
                 res[f], oks[f] = r[k, :, : g.rows[k]], ok[k]
-        self.calls += int(count)
+        self.counter.n += int(count)
         return res, oks
 
     def warm(self, z: np.ndarray) -> None:

@@ -1,0 +1,295 @@
+"""The fit's stages, each on a `Setup` and returning a `Point` (the order is
+`identify._pipeline`'s; design notes with the measured reasons: `identify/README.md`).
+
+1. **Closed-form start** (`start_restitution`, `_setup.start_points`): e from successive
+   rebound heights or drag-corrected flight times, t_c from the 0.5–2 ms prior, then
+   (κ, k_r) from the law's inverse. Two-racket traces, which have no closed form, start
+   from the best e on a grid.
+2. **Starts** (`run_starts`): each start loosely on the first window, after the optional
+   optax stage (`identify._fit._gradient`).
+3. **Growing windows** (`windows_from`): the first 35%, 65%, then all of each file's
+   span: a window that holds the first bounces pins the phase and each longer window
+   starts next to its optimum.
+4. **Robust pass** (`robust_pass`): Cauchy-weighted LM rounds, then rows beyond the
+   outlier threshold are excluded.
+5. **Final pass** (`final_pass`): least squares on the kept rows, the steering prior
+   dropped where the data fix t_c; impact onsets whose scatter no stated timing noise
+   explains are refitted under the restitution-scatter error model (`ratio_transforms`).
+
+A stage that fits other rows than its input (no prior, the log-ratio rows) derives
+its own evaluator (`Setup.with_evaluator`); nothing changes the set-up it was given.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from .._data._import import ratio_chain
+from ._derived import derived_quantities
+from ._gradient import gradient_step, run_gradient_stage
+from ._initial import CONTACT_TIME_GUESS
+from ._lm import LMPoint, levenberg_marquardt
+from ._robust import RatioResiduals, cauchy_weights, flag_outliers, robust_scale
+from ._setup import start_point
+from ._uncertainty import covariance, goodness_of_fit
+
+_WINDOWS = (0.35, 0.65, 1.0)
+#: The robust pass excludes at most this fraction of a fit's rows; beyond it the model,
+#: not a few rows, is what misfits, and nothing is excluded.
+MAX_OUTLIER_FRACTION = 0.2
+
+
+@dataclasses.dataclass(frozen=True)
+class Point:
+    """Where a stage left the fit: the joint z, its residuals, Jacobian and cost, the LM
+    iterations and gradient steps spent to get there, and the last stop's verdict."""
+
+    z: np.ndarray
+    r: np.ndarray
+    jac: np.ndarray
+    cost: float
+    iterations: int
+    converged: bool
+    why: str
+    gradient_steps: int = 0
+
+    @classmethod
+    def from_lm(cls, out: LMPoint, *, iterations: int = 0, gradient_steps: int = 0) -> Point:
+        return cls(
+            out.z,
+            out.r,
+            out.jac,
+            out.cost,
+            iterations + out.iterations,
+            out.converged,
+            out.why,
+            gradient_steps,
+        )
+
+    def then(self, out: LMPoint) -> Point:
+        """The point a further LM stage `out` reached, its iterations added to these."""
+        return Point.from_lm(out, iterations=self.iterations, gradient_steps=self.gradient_steps)
+
+
+def windows(setup) -> tuple[float, ...]:
+    """Growing windows for traces and for onset sequences (apex heights: all at once)."""
+    return _WINDOWS if any(d.observe in ("trace", "impacts") for d in setup.datasets) else (1.0,)
+
+
+def row_weights(setup, rows, fraction: float = 1.0, robust: np.ndarray | None = None) -> np.ndarray:
+    """Weights of the data rows (fitted rows inside the window), then 1 per prior row in use.
+
+    A trace's or an onset sequence's window keeps the rows in the first `fraction` of
+    its span: Adam or LM on a raw 2 s trace from a 2× wrong start goes out of phase,
+    and late onsets predicted from a wrong start get matched to the wrong bounce, while
+    a window that holds the first bounces pins the phase and each longer window starts
+    next to its optimum.
+    """
+    w = rows.fitted.astype(float)
+    if fraction < 1.0:
+        for f, d in enumerate(setup.datasets):
+            if d.observe in ("trace", "impacts"):
+                t = setup.times[f]
+                w[rows.of_file(f)] *= t <= t[0] + fraction * (t[-1] - t[0])
+    if robust is not None:
+        w = w * robust
+    ev = setup.evaluator
+    return np.concatenate([w, np.ones(len(ev._prior_pairs()))]) if ev.prior else w
+
+
+def lm(setup, z, weights, opts, *, dchi2=1e-6, free=None) -> LMPoint:
+    """The LM on `setup`'s evaluator, free entries (or `free`) and bounds."""
+    return levenberg_marquardt(
+        setup.evaluator,
+        z,
+        setup.free if free is None else free,
+        weights,
+        setup.lo,
+        setup.hi,
+        max_iterations=opts.max_iterations,
+        dchi2=dchi2,
+    )
+
+
+def start_restitution(setup, rows) -> tuple[float, str]:
+    """The start's e and where it comes from (the closed form, or a grid search)."""
+    if setup.e0 is not None:
+        return setup.e0, setup.e_source
+    # No closed form (two-racket traces): the best e on a grid, at the prior's t_c.
+    ev = setup.evaluator
+    grid = np.linspace(0.3, 0.98, ev.rows)
+    w = row_weights(setup, rows, _WINDOWS[0])
+    costs = [
+        np.sum((w * r) ** 2) if ok else np.inf
+        for r, ok in ev.values([start_point(setup, e, CONTACT_TIME_GUESS) for e in grid])
+    ]
+    return float(grid[int(np.argmin(costs))]), "grid search (no closed form for this scene)"
+
+
+def run_starts(setup, candidates, rows, opts) -> list[Point]:
+    """Every start on the first window, loosely (it only has to find the basin)."""
+    step_fn = gradient_step(opts.optimizer, opts.gradient) if opts.method == "optax" else None
+    first = row_weights(setup, rows, windows(setup)[0])
+    runs = []
+    bar = _progress(len(candidates), opts.progress)
+    for z in candidates:
+        z, gradient_steps = z.copy(), 0
+        if step_fn is not None and opts.steps > 0:
+            z, gradient_steps = run_gradient_stage(step_fn, opts, setup, rows, first, z)
+        runs.append(Point.from_lm(lm(setup, z, first, opts, dchi2=1e-2), gradient_steps=gradient_steps))
+        bar.update(1)
+    bar.close()
+    return runs
+
+
+def windows_from(setup, point: Point, rows, opts) -> Point:
+    """The growing windows after the first, from `point` (loose LM on each)."""
+    for fraction in windows(setup)[1:]:
+        point = point.then(lm(setup, point.z, row_weights(setup, rows, fraction), opts, dchi2=1e-2))
+    return point
+
+
+def robust_pass(setup, best: Point, rows, opts):
+    """Cauchy-weighted LM rounds, then the rows beyond the threshold are excluded.
+
+    Returns the point to go on from, the rows (with `outlier` set) and the robust scale.
+    The point is the robust one unless the plain least-squares point fits the kept
+    rows better; when more than `MAX_OUTLIER_FRACTION` of the rows would go, nothing
+    is excluded and the least-squares point is kept.
+    """
+    n = sum(setup.n_rows)
+    floor = 1.0 if setup.sigma_known else 0.0
+    scale = robust_scale(best.r[:n], rows.fitted, floor=floor)
+    if not np.any(flag_outliers(best.r[:n], rows, scale, opts.threshold)):
+        return best, rows, scale  # nothing beyond the threshold: least squares is already robust
+    point = best
+    for _ in range(3):
+        w = row_weights(setup, rows, robust=cauchy_weights(point.r[:n], scale))
+        point = point.then(lm(setup, point.z, w, opts, dchi2=1e-2))
+        scale = robust_scale(point.r[:n], rows.fitted, floor=floor)
+    outlier = flag_outliers(point.r[:n], rows, scale, opts.threshold)
+    if outlier.sum() > MAX_OUTLIER_FRACTION * (~rows.holdout).sum():
+        return best, rows, scale
+    rows = dataclasses.replace(rows, outlier=outlier)
+    kept = rows.fitted
+
+    def kept_cost(p):
+        return float(np.sum(p.r[:n][kept] ** 2)) if math.isfinite(p.cost) else math.inf
+
+    return (point if kept_cost(point) <= kept_cost(best) else best), rows, scale
+
+
+def final_pass(setup, best: Point, rows, opts) -> Point:
+    """One tight pass on all fitted rows; the point's r, J and cost are the data's.
+
+    The steering prior only holds the path where the data say nothing: the tight pass
+    drops it when the data determine t_c themselves (sd(log t_c) < 0.1 without it), and
+    the uncertainty never uses it.
+    """
+    data = setup.with_evaluator(prior=False)
+    stage = data
+    if setup.evaluator.prior:
+        r_data, jac_data, _ = data.evaluator(best.z)
+        keep = rows.fitted
+        cov_tc, _ = covariance(jac_data[keep], r_data[keep], sigma_known=setup.sigma_known)
+        t_c = derived_quantities(setup, best.z, cov_tc)["contact_time"]
+        if not t_c["stderr"] < 0.1 * t_c["value"]:
+            stage = setup
+    # The tight pass may have to follow the long κ–k_r–t_c valley of a joint fit: it
+    # gets four times the iterations of the loose stages.
+    longer = dataclasses.replace(opts, max_iterations=4 * opts.max_iterations)
+    point = best.then(lm(stage, best.z, row_weights(stage, rows), longer))
+    if stage.evaluator.prior:
+        r, jac, _ = data.evaluator(point.z)
+        point = dataclasses.replace(point, r=r, jac=jac, cost=0.5 * float(np.sum((rows.fitted * r) ** 2)))
+    return point
+
+
+def restart(setup, z, rows, opts) -> Point:
+    """Every stage but the robust pass from the joint point z (the first window loosely,
+    the growing windows, the final pass)."""
+    first = Point.from_lm(lm(setup, z, row_weights(setup, rows, windows(setup)[0]), opts, dchi2=1e-2))
+    return final_pass(setup, windows_from(setup, first, rows, opts), rows, opts)
+
+
+def scatter_model_applies(setup, best: Point, rows) -> bool:
+    """Whether impact onsets need the restitution-scatter error model.
+
+    When every file holds impact onsets and their residuals are not explained by a
+    stated timing noise (none stated, or the χ² test fails), the scatter is the ball's:
+    onset residuals then accumulate from bounce to bounce, and least squares on them
+    would take drifts for signal (a contact time of 20 ms fitted to a random walk).
+    """
+    if any(d.observe != "impacts" for d in setup.datasets):
+        return False
+    if not setup.sigma_known:
+        return True
+    n = sum(setup.n_rows)
+    keep = rows.fitted
+    g = goodness_of_fit(
+        float(np.sum(best.r[:n][keep] ** 2)), int(keep.sum()), len(setup.free), sigma_known=True
+    )
+    return g["consistent"] is False
+
+
+def ratio_transforms(setup, rows) -> dict:
+    """Every file's log-ratio rows of `RatioResiduals` (kept rows: not outliers), as the
+    evaluator's `transforms`.
+
+    A last onset that follows an unheard bounce (its interval spans several flights of
+    the ratio chain) is left out of the log-ratio rows: under restitution scatter the
+    predicted onsets drift, the nearest-onset matching can pair it with the bounce it
+    skipped, and nothing after it would show that. It stays in the data, the onset
+    residuals and the plots.
+    """
+    transforms = {}
+    for f in range(setup.layout.n_files):
+        keep = ~rows.outlier[rows.of_file(f)]
+        kept = np.flatnonzero(keep)
+        if len(kept) >= 4 and ratio_chain(setup.times[f][kept]).spans[-1] > 1:
+            keep[kept[-1]] = False
+        transforms[f] = RatioResiduals(times=setup.times[f], keep=keep, sigma=float(setup.sigmas[f]))
+    return transforms
+
+
+def onset_point(setup, best: Point, onsets: Point) -> Point:
+    """The onset residuals and Jacobian at the final point (for plots, rms and the χ² test)."""
+    r, jac, _ = setup.with_evaluator(transforms={}, prior=False).evaluator(best.z)
+    return dataclasses.replace(onsets, z=best.z, r=r, jac=jac)
+
+
+def check_counts(setup, rows) -> None:
+    """Refuse a fit with more free parameters than fitted data rows (or as many, when the
+    noise is estimated from the residuals): its residuals vanish and its values would
+    print as exact."""
+    n, p = int(rows.fitted.sum()), len(setup.free)
+    need = p if setup.sigma_known else p + 1
+    if n < need:
+        names = ", ".join(
+            "/".join(str(x) for x in setup.layout.names()[j] if x is not None) for j in setup.free
+        )
+        raise ValueError(
+            f"data rows = {n} fitted against {p} free parameters ({names}); valid: at least {need} fitted rows "
+            + ("(one more than the free parameters, since no noise is stated and it is estimated from the residuals)"
+               if not setup.sigma_known else "(one per free parameter)")
+            + ": give more data, or fit fewer parameters (--freeze)"
+        )  # fmt: skip
+
+
+class _NoBar:
+    def update(self, n):
+        pass
+
+    def close(self):
+        pass
+
+
+def _progress(total: int, show: bool):
+    if not show:
+        return _NoBar()
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc="starts", unit="start", leave=False)

@@ -1,0 +1,314 @@
+"""`fit()`: κ and k_r (and nuisance parameters) from one or several data sets.
+
+The pipeline over the layers below it: arguments (`identify._fit._options`), the
+set-up (`_fit._setup`), the stages (`_fit._stages`: starts, growing windows, robust
+pass, final pass; `_fit._alone`: starts from each file's own solution), then the
+summary (`identify._report._summary`: Gauss–Newton covariance with honest noise,
+per-file tables, the per-file "alone" restitution, the hold-out prediction), the
+optional profile of κ (`_fit._profile`) and the closed-form gate (`_fit._plausible`).
+
+The Jacobian's columns are central differences of event-located runs (step 1e-4 in
+log κ, log k_r, log k; scaled steps for x0, v0) inside the one compiled call; the time
+offset of impact data only shifts the predictions, so its column is 1/σ in closed form
+and takes no runs. Forward-mode AD through the event mode is exact too, but compiles
+for several times longer than the whole differenced fit takes (design notes:
+`identify/README.md`).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import dataclasses
+import functools
+import math
+import os
+import time
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from jaxunilat.internal import check_choice
+
+from ._fit import _plausible as plausible, _stages as stages
+from ._fit._alone import alone_restitution, alone_starts
+from ._fit._initial import CONTACT_TIME_GUESS
+from ._fit._joint import Layout
+from ._fit._options import (
+    METHODS,
+    Options,
+    check_arguments,
+    check_start,
+    default_nuisance,
+    default_optimizer,
+    load_all,
+    refuse_duplicates,
+    shift_clocks,
+    shift_offset_arguments,
+)
+from ._fit._problem import LAWS, PARAMETERS
+from ._fit._profile import check_profile_minimum, profile_kappa
+from ._fit._restitution import hunt_crossley_from_restitution
+from ._fit._robust import THRESHOLD, Rows
+from ._fit._setup import build, point_at, start_points
+from ._report._result import FitResult
+from ._report._summary import summarize_fit
+
+__all__ = ["METHODS", "default_optimizer", "fit"]
+
+
+def fit(
+    data,
+    *,
+    nuisance: tuple[str, ...] = (),
+    freeze: tuple[str, ...] = (),
+    initial: dict[str, float] | None = None,
+    bounds: dict[str, tuple[float, float]] | None = None,
+    starts: int = 3,
+    seed: int = 0,
+    method: str = "lm",
+    optimizer: optax.GradientTransformation | None = None,
+    steps: int = 100,
+    max_iterations: int = 60,
+    tol: float = 1e-10,
+    profile: bool = False,
+    rel_halfwidth: float = 0.25,
+    progress: bool = False,
+    law: str = "kelvin-voigt",
+    keep_outliers: bool = False,
+    outlier_threshold: float = THRESHOLD,
+    holdout: float = 0.0,
+    gradient: str = "forward",
+) -> FitResult:
+    """Fit κ and k_r of the ball model [K90 Eq. 3.1–3.3] to one or several data sets.
+
+    **Arguments:**
+
+    - `data`: an `identify.Dataset` or a data file's path, or a list of them: a joint
+      fit shares κ, k_r (and the drag, when fitted) and gives each file its own x0, v0
+      and offset.
+    - `nuisance`: extra parameters to fit, from `("drag", "x0", "v0", "offset")`;
+      `offset` (the recording's unknown time origin, s) applies to impact onsets and to
+      traces (a video rarely starts at the release), not to apex heights.
+    - `freeze`: parameters held at their initial value, e.g. `("k_r",)`.
+    - `initial`: starting values in SI units (kappa, k_r in the law's units, drag s/m,
+      x0 m, v0 m/s, offset s); default: the closed-form guess and the files' values.
+    - `bounds`: `{name: (lo, hi)}` in SI units; the fit stays inside (projection).
+    - `starts`: the number of starts (≥ 1); the best final cost wins.
+    - `seed`: the seed of the starts' jitter.
+    - `method`: `"lm"` (Levenberg–Marquardt only) or `"optax"` (`steps` iterations of
+      `optimizer` on ½Σr², then LM).
+    - `optimizer`: an `optax.GradientTransformation`; default `default_optimizer()`.
+    - `steps`: iterations of the gradient stage per start (`method="optax"`).
+    - `max_iterations`: LM iterations per stage.
+    - `tol`: the event mode's rtol = atol for every simulation.
+    - `profile`: also compute the profile likelihood of κ (13 points, ±3 sd).
+    - `rel_halfwidth`: the identifiability threshold (95% half-width / value).
+    - `progress`: show a progress bar over the starts (on stderr).
+    - `law`: `"kelvin-voigt"` (the paper's linear spring and damper), `"hunt-crossley"`
+      (F = κδ^1.5 + k_r δ^1.5 δ̇: restitution falling with impact speed) or `"auto"`
+      (fit both, report χ², AIC and BIC side by side, keep the lower BIC).
+    - `keep_outliers`: skip the robust pass; every row is fitted by least squares.
+    - `outlier_threshold`: rows beyond this many robust residual scales are excluded.
+    - `holdout`: fit the first (1 − holdout) of each file's rows and predict the rest
+      (0 ≤ holdout < 1).
+    - `gradient`: the optax stage's gradient, `"forward"` (Jᵀr from forward-mode
+      Jacobians through the event mode: a few solves for κ and k_r, and a quick
+      compile) or `"reverse"` (`jax.grad`).
+
+    **Returns:** a `FitResult` (`.report()`, `.to_json_dict()`, `.parameters`, …).
+    """
+    began = time.perf_counter()
+    datasets = load_all(data)
+    refuse_duplicates(datasets)
+    originals = list(datasets)
+    datasets, clocks = shift_clocks(datasets)
+    initial, bounds = shift_offset_arguments(initial, bounds, clocks)
+    nuisance, offset_note = default_nuisance(datasets, tuple(nuisance), tuple(freeze))
+    opts = check_arguments(
+        datasets, nuisance=nuisance, freeze=freeze, starts=starts, steps=steps, max_iterations=max_iterations,
+        tol=tol, rel_halfwidth=rel_halfwidth, optimizer=optimizer, method=method, seed=seed, profile=profile,
+        progress=progress, keep_outliers=keep_outliers, outlier_threshold=outlier_threshold, holdout=holdout,
+        gradient=gradient,
+    )  # fmt: skip
+    check_choice("law", law, (*LAWS, "auto"))
+    initial, bounds = check_start(initial, bounds)
+    opts = dataclasses.replace(opts, bounds=bounds, tol=tol)
+    fitted = _fit_laws(datasets, LAWS if law == "auto" else (law,), opts, initial)
+    results = {name: r for name, (r, _) in fitted.items()}
+    common = np.logical_and.reduce([r.used for r in results.values()])
+    comparison = {name: r.criteria(common) for name, r in results.items()}
+    chosen = min(results, key=lambda n: comparison[n]["bic"])
+    result, finish = fitted[chosen]
+    if finish is not None:
+        finish()
+    result.laws = comparison
+    result.law_choice = "auto (lowest BIC)" if law == "auto" else "given"
+    if offset_note:
+        result.notes.append(offset_note)
+    plausible.apply(result)
+    if any(clocks):
+        _restore_clocks(result, originals, clocks)
+    result.wall_s = time.perf_counter() - began
+    return result
+
+
+def _fit_laws(datasets, laws: tuple[str, ...], opts: Options, initial: dict) -> dict:
+    """Every law's `_fit_law` (result, finish), by law name.
+
+    Several laws (`law="auto"`) are fitted side by side, each in its own thread: the
+    fits share nothing but the data, and each law compiles its own program (the law is
+    part of the model's structure), so one law's compilation and runs overlap the
+    other's (the XLA compiler and the compiled runs release the GIL). The results do
+    not depend on it: each fit runs exactly the stages it would run alone. Only the
+    first law shows a progress bar. Each file's "alone" e (a batched refit) is left to the
+    chosen law's `finish`: the other law's table is never reported.
+    """
+    defer = len(laws) > 1
+
+    def one(name: str, progress: bool):
+        setup = build(
+            datasets, law=name, nuisance=opts.nuisance, freeze=opts.freeze, initial=initial,
+            bounds=opts.bounds, tol=opts.tol,
+        )  # fmt: skip
+        return _fit_law(setup, dataclasses.replace(opts, progress=progress, defer_alone=defer))
+
+    if len(laws) == 1:
+        return {laws[0]: one(laws[0], opts.progress)}
+    with concurrent.futures.ThreadPoolExecutor(
+        max_workers=len(laws), thread_name_prefix="identify-law"
+    ) as pool:
+        futures = {name: pool.submit(one, name, opts.progress and k == 0) for k, name in enumerate(laws)}
+        return {name: future.result() for name, future in futures.items()}
+
+
+def _fit_law(setup, opts: Options):
+    """Every stage for one contact law: starts, windows, robust pass, final pass, summary.
+
+    Returns the `FitResult` and `finish`: None, or (with `opts.defer_alone` and several
+    files) the call that adds each file's "alone" e to it (`_fill_alone`)."""
+    began = time.perf_counter()
+    rows = Rows.make(setup.n_rows, opts.holdout)
+    stages.check_counts(setup, rows)
+    with concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="identify-warm") as pool:
+        warming = _warm_evaluator(setup, pool)
+        own_starts = alone_starts(setup, opts) if opts.alone_starts else []
+        if warming is not None:
+            warming.result()
+        e0, e_source = stages.start_restitution(setup, rows)
+        candidates = start_points(setup, e0, opts.starts, np.random.default_rng(opts.seed))
+    runs = stages.run_starts(setup, candidates, rows, opts)
+    best = stages.windows_from(setup, min(runs, key=lambda run: run.cost), rows, opts)
+    scale = None
+    if not opts.keep_outliers:
+        best, rows, scale = stages.robust_pass(setup, best, rows, opts)
+    best = stages.final_pass(setup, best, rows, opts)
+    best, restarts = _restarts(setup, best, own_starts, rows, opts)
+    # The final pass fits the data rows without the steering prior.
+    final, onsets = setup.with_evaluator(prior=False), None
+    if stages.scatter_model_applies(setup, best, rows):
+        ratio = setup.with_evaluator(transforms=stages.ratio_transforms(setup, rows))
+        fitted = stages.final_pass(ratio, best, rows, opts)
+        onsets = stages.onset_point(setup, fitted, best)
+        best, final = fitted, ratio.with_evaluator(prior=False)
+    initial = dict(restitution=e0, contact_time=CONTACT_TIME_GUESS, source=e_source)
+    result = summarize_fit(
+        final, best, rows, opts, runs=runs, initial=initial, robust_scale=scale, onsets=onsets
+    )
+    _note_restarts(result, setup, restarts)
+    if opts.profile and setup.layout.index[0, 0] in setup.free:
+        result.profile = profile_kappa(final, best, rows, result, opts)
+        check_profile_minimum(result, best, setup)
+    result.wall_s = time.perf_counter() - began
+    finish = None
+    if opts.defer_alone and setup.layout.n_files > 1:
+        finish = functools.partial(_fill_alone, result, final, best, rows, opts)
+    return result, finish
+
+
+def _restarts(setup, best, own_starts, rows, opts):
+    """The same stages from each file's own solution (`alone_starts`), on the rows the
+    main path kept: a joint LM can stop on the long κ–k_r–t_c valley well above a point
+    it can reach. Returns the best point and each start's (file, final cost)."""
+    restarts = []
+    for f, z in own_starts:
+        point = stages.restart(setup, z, rows, opts)
+        restarts.append((f, point.cost))
+        if math.isfinite(point.cost) and point.cost < best.cost:
+            best = dataclasses.replace(point, iterations=best.iterations + point.iterations)
+    return best, restarts
+
+
+def _note_restarts(result, setup, restarts) -> None:
+    if restarts:
+        names = [d.path or f"data set {f + 1}" for f, d in enumerate(setup.datasets)]
+        result.notes.append(
+            "joint fit also started from each file's own solution (fitted alone, one start); final chi-square "
+            "over all fitted rows of this fit: "
+            + ", ".join(f"from {os.path.basename(names[f])}: {2 * c:.6g}" for f, c in restarts)
+        )
+
+
+def _fill_alone(result: FitResult, setup, best, rows, opts) -> None:
+    """Each file's "alone" e into `result.datasets` (deferred by `opts.defer_alone`)."""
+    before = setup.evaluator.calls
+    for entry, alone in zip(result.datasets, alone_restitution(setup, best, rows, opts), strict=True):
+        entry["restitution_alone"] = alone
+    result.simulations += setup.evaluator.calls - before
+
+
+def _warm_evaluator(setup, pool) -> concurrent.futures.Future | None:
+    """Hunt–Crossley: compile the fit's program in `pool` while the start is computed.
+
+    Hunt–Crossley's start points simulate single impacts (`hunt_crossley_from_restitution`,
+    a compiled program of its own), and so does its "alone" fit of a few files: the
+    fit's program compiles meanwhile, by one run at the closed-form start (`refine=0`:
+    nothing simulated), with the shapes of every later call. Kelvin–Voigt's start is in
+    closed form: nothing to overlap (None).
+    """
+    if setup.law != "hunt-crossley":
+        return None
+    e = setup.e0 if setup.e0 is not None else 0.8
+    mass = float(setup.datasets[0].mass)
+    kappa, k_r = hunt_crossley_from_restitution(e, CONTACT_TIME_GUESS, mass, setup.speed, refine=0)
+    return pool.submit(setup.evaluator.warm, point_at(setup, kappa, k_r))
+
+
+def _restore_clocks(result, originals, clocks) -> None:
+    """Report offsets on the files' own absolute clocks again (see `ABSOLUTE_CLOCK_S`)."""
+    n = len(originals)
+    layout = Layout(n_files=n)
+    i_off = PARAMETERS.index("offset")
+    if result.joint_z is not None and np.asarray(result.joint_z).size == layout.size:
+        z = np.array(result.joint_z, dtype=float)
+        for f, ref in enumerate(clocks):
+            z[layout.index[f, i_off]] += ref
+        result.joint_z = z
+    result.z = np.array(result.z, dtype=float)
+    result.z[i_off] += clocks[0]
+    entry = result.parameters["offset"]
+    result.parameters["offset"] = {
+        **entry,
+        "value": entry["value"] + clocks[0],
+        "ci95": [v + clocks[0] for v in entry["ci95"]],
+    }
+    for f, ref in enumerate(clocks):
+        if f < len(result.datasets):
+            own = result.datasets[f]["parameters"].get("offset")
+            if own is not None:
+                own["value"] += ref
+                own["ci95"] = [v + ref for v in own["ci95"]]
+    result.data = originals[0]
+    result.datasets_data = list(originals)
+    if clocks[0]:
+        problem = result.problem
+        result.problem = eqx.tree_at(
+            lambda p: (p.y_obs, p.t_obs),
+            problem,
+            (jnp.asarray(problem.y_obs) + clocks[0], jnp.asarray(problem.t_obs) + clocks[0]),
+        )
+    result.notes.append(
+        "onsets on an absolute clock: fitted relative to each file's first onset, the offset reported on the file's "
+        "own clock"
+    )
