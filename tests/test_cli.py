@@ -374,10 +374,12 @@ def test_bundled_data_is_found_from_any_working_folder(tmp_path, monkeypatch):
     beside the package, not only in the working folder."""
     import os
 
-    from jaxunilat._bench._main import _data_sets
-    from jaxunilat._cli._identify import default_data_path
+    import jaxunilat._bench._main as bench
+
+    data_sets = getattr(bench, "data_sets", None) or bench._data_sets
+    from identify._cli._identify import default_data_path
 
     monkeypatch.chdir(tmp_path)
     path = default_data_path()
     assert os.path.isfile(path) and path.endswith(os.path.join("data", "drop_trace.csv"))
-    assert path in _data_sets() and len(_data_sets()) >= 5
+    assert path in data_sets() and len(data_sets()) >= 5

@@ -16,8 +16,9 @@ def add_bench(commands) -> None:
         help="benchmark run time against error, throughput, gradient cost and compile time",
         description="Benchmark Table 1 example 2 [K90] against scipy and NumPy peers, and a compiled "
         "event-located DOP853 loop (Numba) where installed, in the same run; write bench.json, "
-        "work_precision.png and throughput.png and print the goal ratios P1-P5 and P7-P10 (plain vmap, "
-        "jax.grad, the command line's second run and a default user's script, as users write them). "
+        "work_precision.png and throughput.png and print the goals (time ratios against the best peer at 1e-9 m and "
+        "1e-6 m, throughput, gradient and compile cost, plain vmap, jax.grad, the command line's second "
+        "run and a default user's script, as users write them). "
         "The full size also times sweeps over 1, 2 and 4 processes and a cold 30-throw joint fit. "
         'Needs scipy (and numba for the compiled loop): pip install "jaxunilat[bench]".',
     )
@@ -29,11 +30,13 @@ def add_bench(commands) -> None:
 
 
 def _run_bench(args) -> int:
+    from ..internal._cli import input_errors
+    from ..internal._errors import EXIT_OK, RunError, UsageError
     from ..internal._io import check_output_dir
-    from ._main import EXIT_OK, RunError, UsageError
 
     out = args.out
-    check_output_dir("--out", out, OUTPUT_FILES)
+    with input_errors():
+        check_output_dir("--out", out, OUTPUT_FILES)
     try:
         import scipy  # noqa: F401
     except ImportError:

@@ -1,524 +1,98 @@
-"""The `jaxunilat` command line.
+"""The `jaxunilat` command line: the shell that builds the parser and maps errors to exit codes.
 
-    jaxunilat simulate ball [--example N] [--kappa K] ... [--out FILE.csv] [--plot FILE.png]
-                            [--solver event --events FILE.csv]
+    jaxunilat [--no-cache] [--debug] COMMAND ...
 
-Exit codes: 0 success, 1 a run-time failure (the solver diverged or ran out of steps,
-a file could not be written), 2 bad user input. Every error is one line on stderr,
-`jaxunilat: error: ...`, with no traceback and no usage dump.
+Exit codes: 0 success; 1 a run-time failure (the solver diverged or ran out of steps,
+a file could not be written) or an internal error (a bug); 2 bad usage or input; 3 a fit
+that did not converge or a recording refused as implausible (identify's commands);
+130 interrupted. Every error is one line on stderr, `jaxunilat: error: ...`, with no
+traceback and no usage dump; an internal error's line names the exception's type, and
+`--debug` prints its traceback.
 
-Adding a command: write `add_<name>(subparsers)` that adds its parser and sets
-`func=<handler>` (a function `args -> int`), then list it in `_COMMANDS`, as
-`_lazy("module", "add_<name>")` when it lives in another module (keep such modules light
-to import: heavy imports go inside the handler). Models under `simulate` are listed in
-`_SIMULATE_MODELS` the same way. Handlers raise `UsageError`/`ValueError` for bad input
-(exit 2) and `RunError` for run-time failures (exit 1).
+Commands: jaxunilat's own are listed in `_COMMANDS`, each `(name, module)` whose module
+has `add_<name>(subparsers)`, imported only when the parser is built. Other packages
+(identify) add theirs through the `jaxunilat.commands` entry points
+(`jaxunilat.internal._cli` documents the protocol); jaxunilat never imports them by name.
 """
 
 from __future__ import annotations
 
-import argparse
 import logging
-import math
 import os
 import re
 import sys
-import time
 
-import numpy as np
+from ..internal._cli import COMMANDS_GROUP
+from ..internal._errors import (
+    EXIT_INTERNAL,
+    EXIT_OK,
+    EXIT_RUNTIME,
+    EXIT_USAGE,
+    PROG,
+    InputError,
+    RunError,
+    UsageError,
+)
+from ._args import Parser, cli_spelling, command_flags
 
-from ..internal._errors import EXIT_OK, EXIT_RUNTIME, EXIT_USAGE, PROG, RunError, UsageError
-
-
-class _Parser(argparse.ArgumentParser):
-    """An `ArgumentParser` that raises `UsageError` instead of printing usage and exiting.
-
-    It also reads `-1e-3`, `-inf` and `-.5` as negative numbers, not as options.
-    """
-
-    def __init__(self, *args, **kwargs):
-        kwargs.setdefault("allow_abbrev", False)
-        super().__init__(*args, **kwargs)
-        self._negative_number_matcher = re.compile(
-            r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.IGNORECASE
-        )
-
-    def error(self, message):
-        raise UsageError(message)
-
-
-def count(text: str) -> int:
-    """An argparse type for counts: an integer, also spelled like `1e4` (integral only)."""
-    try:
-        return int(text)
-    except ValueError:
-        pass
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"invalid count {text!r}; give an integer, e.g. 2001") from None
-    if not (math.isfinite(value) and value == int(value)):
-        raise argparse.ArgumentTypeError(f"invalid count {text!r}; give an integer, e.g. 2001")
-    return int(value)
-
-
-def add_solver_knobs(group, *, max_steps: str, max_events: str) -> None:
-    """Add `simulate`'s step budget and event-mode settings as flags (defaults: the texts)."""
-    group.add_argument("--max-steps", type=count, help=f"step budget (default {max_steps})")
-    group.add_argument(
-        "--max-events",
-        type=count,
-        help=f"event mode: event buffer, entries/exits/extrema (default {max_events})",
-    )
-    group.add_argument(
-        "--piece-solver",
-        choices=("tsit5", "dopri8"),
-        help="event mode: Runge-Kutta pair of the smooth pieces (default tsit5; dopri8: fewer steps "
-        "at tolerances below ~1e-9)",
-    )
-    group.add_argument(
-        "--flight",
-        choices=("closed", "integrated"),
-        help="event mode: free flight in closed form where the model has one, or integrated (default closed)",
-    )
-
-
-def check_solver_knobs(args) -> None:
-    """Raise `UsageError` when an event-mode flag is given with another solver."""
-    if args.solver != "event":
-        for flag in ("max_events", "piece_solver", "flight"):
-            if getattr(args, flag) is not None:
-                raise UsageError(
-                    f"--{flag.replace('_', '-')} applies to --solver event only (got --solver {args.solver})"
-                )
-
-
-def solver_knobs(args) -> dict:
-    """The keyword arguments of `simulate` that the knob flags set (given ones only)."""
-    names = ("max_steps", "max_events", "piece_solver", "flight")
-    return {name: getattr(args, name) for name in names if getattr(args, name) is not None}
-
-
-def flag_spelling(knob: str, value: str | None = None) -> str:
-    """How a `simulate` keyword is written as a flag of `simulate ball|coupling` in a hint."""
-    if knob == "span":
-        return "--t1"
-    flag = "--" + knob.replace("_", "-")
-    return flag if value is None else f"{flag} {value}"
-
-
-def _one_line(text: str) -> str:
-    return " ".join(str(text).split())
-
-
-def seed(text: str) -> int:
-    """An argparse type for random seeds: an integer >= 0 (what NumPy's generators take)."""
-    try:
-        value = count(text)
-    except argparse.ArgumentTypeError:
-        value = None
-    if value is None or value < 0:
-        raise argparse.ArgumentTypeError(f"invalid seed {text!r}; valid range is integers >= 0, e.g. 0")
-    return value
-
-
-#: API keywords that have no flag: the hint's words about them are dropped on the command line.
-_NO_FLAG = (
-    re.compile(r"\s*\((or pass )?allow_coarse_dt=True[^)]*\)"),
-    re.compile(r";?\s*pass throw=False to inspect the partial result"),
+#: jaxunilat's own commands: (name, module holding `add_<name>(subparsers)`).
+_COMMANDS = (
+    ("simulate", "jaxunilat._cli._simulate"),
+    ("sensitivity", "jaxunilat._cli._sensitivity"),
+    ("reproduce", "jaxunilat._cli._reproduce"),
+    ("bench", "jaxunilat._cli._bench"),
 )
 
-
-#: Bare messages of libraries (NumPy's random generators) that name no parameter: the
-#: flag whose value causes them, and that flag's valid range.
-_BARE = {"expected non-negative integer": ("seed", "integers >= 0")}
-
-
-def _named(message: str, args) -> str:
-    """`message`, or for a bare library message the flag and value that caused it
-    (e.g. `--seed -5 is out of range; valid range is integers >= 0`)."""
-    found = _BARE.get(message.strip())
-    if found is None or getattr(args, found[0], None) is None:
-        return message
-    name, valid = found
-    return f"{flag_spelling(name)} {getattr(args, name)} is out of range; valid range is {valid}"
+#: The order of `jaxunilat --help`'s command list; commands not named here come last,
+#: in name order.
+_HELP_ORDER = ("simulate", "identify", "import", "qualify", "sensitivity", "reproduce", "export", "bench")
 
 
-def command_flags(parser: argparse.ArgumentParser, args) -> set[str]:
-    """The long flags of the (sub)command that `args` ran, e.g. {"--dt", "--solver", ...}."""
-    flags: set[str] = set()
-    current = parser
-    while True:
-        sub = next((a for a in current._actions if isinstance(a, argparse._SubParsersAction)), None)
-        name = None if sub is None else getattr(args, sub.dest, None)
-        if name not in getattr(sub, "choices", {}):
-            break
-        current = sub.choices[name]
-    for action in current._actions:
-        flags.update(o for o in action.option_strings if o.startswith("--"))
-    return flags
-
-
-def cli_spelling(message: str, flags: set[str]) -> str:
-    """`message` (from the API) with its keyword hints spelled as the command's flags.
-
-    `solver='tsit5'` becomes `--solver tsit5`, `heaviside=Exact()` `--heaviside exact` and
-    `use dt <= ...` `use --dt <= ...`, where the command has that flag; hints about
-    keywords without a flag (`allow_coarse_dt`, `throw`) are dropped. A message's leading
-    `name = value` stays: the flag's name without its dashes.
-    """
-
-    def flag(name: str) -> str | None:
-        spelled = "--" + name.replace("_", "-")
-        return spelled if spelled in flags else None
-
-    for pattern in _NO_FLAG:
-        message = pattern.sub("", message)
-
-    def keyword(m):
-        f = flag(m.group(1))
-        return f"{f} {m.group(2).lower()}" if f else m.group(0)
-
-    message = re.sub(r"\b([a-z][a-z0-9_]*)='([\w.-]+)'", keyword, message)
-    message = re.sub(r"\b([a-z][a-z0-9_]*)=([A-Z]\w*)\(\)", keyword, message)
-
-    def bound(m):
-        f = flag(m.group(2))
-        return f"{m.group(1)}{f}{m.group(3)}" if f else m.group(0)
-
-    return re.sub(r"(\buse )([a-z][a-z0-9_]*)( <=| >=| <| >)", bound, message)
-
-
-# -- simulate ball -------------------------------------------------------------------
-
-
-def _add_simulate_ball(models) -> None:
-    from .._models._ball import PAPER_DRAG, PAPER_GAP
-    from .._solver._observe import CONTACT_COLUMNS
-    from .._solver._settings import SOLVERS
-
-    p = models.add_parser(
-        "ball",
-        help="the table-tennis ball between two rackets [K90 §3, Table 1]",
-        description="Simulate the table-tennis ball between two rackets [K90 Eq. 3.1-3.3]. "
-        "Parameters default to Table 1's example; explicit flags override it.",
-    )
-    model = p.add_argument_group("model")
-    model.add_argument("--example", type=int, default=2, help="Table 1 example 1-5 (default 2)")
-    model.add_argument("--kappa", type=float, help="contact stiffness kappa, N/m (default: the example's)")
-    model.add_argument(
-        "--k-r", type=float, dest="k_r", help="contact damping k_r, N*s/m (default: the example's)"
-    )
-    model.add_argument(
-        "--drag", type=float, help=f"drag k = 1/v_max, s/m; 0 removes drag (default {PAPER_DRAG})"
-    )
-    model.add_argument("--mass", type=float, help="mass m, kg (default 2.37e-3)")
-    model.add_argument(
-        "--gap", type=float, help=f"gap 2a between the rackets, m; walls at +-gap/2 (default {PAPER_GAP})"
-    )
-    model.add_argument("--x0", type=float, help="initial position, m (default -gap/2, the lower racket)")
-    model.add_argument("--v0", type=float, help=f"initial velocity, m/s (default -1/{PAPER_DRAG})")
-    model.add_argument(
-        "--heaviside",
-        choices=("exact", "logistic", "softplus"),
-        default="exact",
-        help="Heaviside option (default exact)",
-    )
-    model.add_argument("--eps", type=float, help="smoothing width eps, m (required for logistic/softplus)")
-    run = p.add_argument_group("solver")
-    run.add_argument("--t1", type=float, default=2.0, help="end time, s (default 2.0)")
-    run.add_argument("--solver", choices=SOLVERS, default="tsit5", help="integrator (default tsit5)")
-    run.add_argument("--dt", type=float, help="rk4 step, s (default 1e-5); tsit5: first step")
-    run.add_argument("--rtol", type=float, default=1e-10, help="tsit5 relative tolerance (default 1e-10)")
-    run.add_argument("--atol", type=float, default=1e-10, help="tsit5 absolute tolerance (default 1e-10)")
-    add_solver_knobs(run, max_steps="rk4: (t1 - t0)/dt + 16; tsit5: 200000; event: 16384", max_events="2048")
-    out = p.add_argument_group("output")
-    out.add_argument(
-        "--samples",
-        type=count,
-        default=2001,
-        help="uniform output samples on [0, t1], ends included (default 2001)",
-    )
-    out.add_argument("--out", metavar="FILE.csv", help="write the samples as CSV with header t,x,v")
-    out.add_argument("--plot", metavar="FILE.png", help="draw x(t), v(t) and the phase diagram v(x)")
-    out.add_argument(
-        "--events",
-        metavar="FILE.csv",
-        help="write the located contacts as CSV, one row per contact, with header "
-        + ",".join(CONTACT_COLUMNS)
-        + " (s, m/s, N, m; empty t_out, v_out, restitution for a contact still open at t1); "
-        "needs --solver event",
-    )
-    p.set_defaults(func=_run_simulate_ball)
-
-
-def _build_ball(args):
-    """The `Ball` and initial state (x0 [m], v0 [m/s]) that the flags describe."""
-    from .._models._ball import PAPER_DRAG, PAPER_GAP, Ball
-    from .._models._heaviside import heaviside
-    from ..internal._validate import check_range
-
-    gap = PAPER_GAP if args.gap is None else args.gap
-    check_range("gap", gap, lo=0.0, lo_open=True, unit="m")
-    check_range("eps", args.eps, lo=0.0, lo_open=True, unit="m", allow_none=True)
-    overrides = dict(lower=-gap / 2, upper=gap / 2, heaviside=heaviside(args.heaviside, args.eps))
-    for name in ("kappa", "k_r", "mass"):
-        if getattr(args, name) is not None:
-            overrides[name] = getattr(args, name)
-    if args.drag is not None:
-        check_range("drag", args.drag, lo=0.0, unit="s/m")
-        overrides["drag"] = None if args.drag == 0 else args.drag
-    ball = Ball.table1(args.example, **overrides)
-    x0 = -gap / 2 if args.x0 is None else args.x0
-    v0 = -1.0 / PAPER_DRAG if args.v0 is None else args.v0
-    check_range("x0", x0, unit="m")
-    check_range("v0", v0, unit="m/s")
-    ball.check_initial_state(np.array([x0, v0]))
-    return ball, x0, v0
-
-
-def _check_outputs(args) -> None:
-    from ..internal._io import check_output_paths
-
-    if args.events is not None and args.solver != "event":
-        raise UsageError(f"--events needs --solver event (got --solver {args.solver})")
-    check_output_paths(("--out", args.out), ("--plot", args.plot), ("--events", args.events))
-    check_plot_format(args.plot)
-
-
-def check_plot_format(path: str | None) -> None:
-    """Refuse a `--plot` file whose suffix matplotlib cannot write, before any work (None:
-    no plot asked for)."""
-    if path is None:
-        return
-    from matplotlib.backends.backend_agg import FigureCanvasAgg  # ~0.2 s: only when plotting
-
-    suffix = os.path.splitext(path)[1].lstrip(".").lower()
-    if suffix and suffix not in FigureCanvasAgg.get_supported_filetypes():
-        raise ValueError(f"--plot {path!r}: unsupported image format {suffix!r}; use e.g. .png, .pdf, .svg")
-
-
-def _contact_starts(contact, x):
-    """Contacts seen on the output grid: (total, lower, upper) from 0→1 switches and t0."""
-    on = np.asarray(contact) > 0.5
-    starts = np.flatnonzero(np.concatenate([on[:1], on[1:] & ~on[:-1]]))
-    upper = int(np.sum(np.asarray(x)[starts] > 0))
-    return len(starts), len(starts) - upper, upper
-
-
-def _grid_caveat(ball, args) -> str:
-    """A note for the contact count on the output grid when a contact is shorter than the
-    spacing of the samples (the grid can then miss it: e.g. --kappa 1e12 gives contacts
-    of ~1.5e-7 s against 1e-3 s between samples); empty otherwise."""
-    from .._models._contact import contact_time
-
-    k_r = 0.0 if ball.k_r is None else float(ball.k_r)
-    t_c = float(contact_time(float(ball.kappa), k_r, float(ball.mass)))
-    spacing = args.t1 / (args.samples - 1)
-    if not t_c < spacing:
-        return ""
-    return (
-        f"; a lower bound: a contact lasts ~{t_c:.2g} s, less than the {spacing:.2g} s between samples, "
-        "so the grid can miss it; --solver event locates every contact"
-    )
-
-
-def _failure_message(status, args, ball) -> str:
-    from .._solver._settings import DEFAULT_MAX_EVENTS, DEFAULT_MAX_STEPS, failure_hints
-    from .._solver._simulate import Status
-
-    hints = failure_hints(
-        args.solver,
-        piece_solver=args.piece_solver or "tsit5",
-        flight=args.flight or "closed",
-        spell=flag_spelling,
-    )
-    if status == Status.NONFINITE and args.solver == "rk4":
-        t_c = math.pi * math.sqrt(float(ball.mass) / float(ball.kappa))
-        return (
-            f"the solution became non-finite (NaN or inf) with rk4 at dt = {args.dt:g} s: dt is beyond "
-            f"RK4's stability limit for this contact (contact time ~ pi*sqrt(m/kappa) = {t_c:.3g} s); "
-            f"decrease --dt (e.g. --dt {t_c / 100:.1g}) or use --solver tsit5"
-        )
-    if status == Status.NONFINITE:
-        return f"the solution became non-finite (NaN or inf); {hints['nonfinite']}"
-    if status == Status.MAX_STEPS:
-        budget = args.max_steps
-        if budget is None:
-            budget = (
-                math.ceil(args.t1 / args.dt) + 16 if args.solver == "rk4" else DEFAULT_MAX_STEPS[args.solver]
-            )
-        return (
-            f"the {args.solver} solver used all its --max-steps = {budget} steps before t1 = {args.t1:g} s; "
-            f"{hints['max_steps']}"
-        )
-    if status == Status.EVENT_OVERFLOW:
-        events = DEFAULT_MAX_EVENTS if args.max_events is None else args.max_events
-        return f"more than --max-events = {events} events before t1 = {args.t1:g} s; {hints['max_events']}"
-    return f"the {args.solver} solver failed before t1 = {args.t1:g} s (status {Status(status).name.lower()})"
-
-
-def _describe(args, ball, x0, v0) -> list[tuple[str, str]]:
-    overridden = any(getattr(args, n) is not None for n in ("kappa", "k_r"))
-    drag = "off" if ball.drag is None else f"k = {float(ball.drag):g} s/m"
-    k_r = "none" if ball.k_r is None else f"{float(ball.k_r):g} N*s/m"
-    hs = args.heaviside + ("" if args.eps is None else f", eps = {args.eps:g} m")
-    if args.heaviside == "exact" and args.eps is not None:
-        hs += " (ignored)"
-    if args.solver == "rk4":
-        solver = f"rk4, dt = {args.dt:g} s"
-    else:
-        solver = f"{args.solver}, rtol = {args.rtol:g}, atol = {args.atol:g}" + (
-            "" if args.dt is None else f", first step {args.dt:g} s"
-        )
-    if args.solver == "event":
-        solver += f", {args.piece_solver or 'tsit5'} pieces, {args.flight or 'closed'} flight"
-    for flag in ("max_steps", "max_events"):
-        if getattr(args, flag) is not None:
-            solver += f", {flag.replace('_', ' ')} {getattr(args, flag)}"
-    return [
-        ("run", f"ball, {'based on ' if overridden else ''}Table 1 example {args.example}"),
-        (
-            "model",
-            f"kappa = {float(ball.kappa):g} N/m, k_r = {k_r}, m = {float(ball.mass):g} kg, "
-            f"g = {float(ball.gravity):g} m/s^2, drag {drag}",
-        ),
-        ("walls", f"lower = {float(ball.lower):g} m, upper = {float(ball.upper):g} m"),
-        ("initial", f"x0 = {float(x0)!r} m, v0 = {float(v0)!r} m/s"),
-        ("heaviside", hs),
-        ("solver", solver),
-        ("time", f"[0, {args.t1:g}] s, {args.samples} samples"),
-    ]
-
-
-def _run_simulate_ball(args) -> int:
-    from .._solver._simulate import Status, simulate
-
-    if args.solver == "rk4" and args.dt is None:
-        args.dt = 1e-5
-    ball, x0, v0 = _build_ball(args)
-    check_solver_knobs(args)
-    _check_outputs(args)
-
-    start = time.perf_counter()
-    sol = simulate(
-        ball,
-        [x0, v0],
-        args.t1,
-        solver=args.solver,
-        dt=args.dt,
-        rtol=args.rtol,
-        atol=args.atol,
-        samples=args.samples,
-        outputs=("x", "v", "contact"),
-        throw=False,
-        **solver_knobs(args),
-    )
-    status = int(sol.status)  # waits for the result
-    wall = time.perf_counter() - start
-    if status != Status.SUCCESS:
-        raise RunError(_failure_message(status, args, ball))
-
-    ts, x, v = (np.asarray(a, dtype=float) for a in (sol.ts, sol["x"], sol["v"]))
-    table = None
-    if sol.events is not None:
-        from .._solver._observe import contact_table
-
-        table = contact_table(sol, ball)
-        n, upper = len(table["t_in"]), int(np.sum(table["wall"] == "upper"))
-        lower, where, caveat = n - upper, "located", ""
-    else:
-        n, lower, upper = _contact_starts(sol["contact"], x)
-        where = "on the output grid"
-        caveat = _grid_caveat(ball, args)
-    x1, v1 = (float(a) for a in np.asarray(sol.y1))
-    lines = _describe(args, ball, x0, v0) + [
-        (
-            "steps",
-            f"{int(sol.num_steps)} (accepted {int(sol.num_accepted_steps)}, rejected {int(sol.num_rejected_steps)})",
-        ),
-        ("wall time", f"{wall:.3f} s (including JIT compilation, or loading it from the cache)"),
-        ("contacts", f"{n} {where} ({lower} lower, {upper} upper){caveat}"),
-        ("final", f"x(t1) = {x1!r} m, v(t1) = {v1!r} m/s"),
-    ]
-    try:
-        if args.out is not None:
-            from ..internal._io import write_csv
-
-            write_csv(args.out, ("t", "x", "v"), (ts, x, v))
-            lines.append(("wrote", f"{args.out} (CSV t,x,v: {len(ts)} rows)"))
-        if args.plot is not None:
-            from ..plot._ball import plot_ball, save_figure
-
-            summary = dict(lines)
-            title = (
-                f"{summary['run'][:1].upper()}{summary['run'][1:]}: {summary['model']}\n"
-                f"{summary['walls']}; {summary['heaviside']} Heaviside; {summary['solver']}"
-            )
-            fig = plot_ball(ts, x, v, walls=(float(ball.lower), float(ball.upper)), title=title)
-            save_figure(fig, args.plot)
-            lines.append(("wrote", f"{args.plot} (x(t), v(t), v(x))"))
-        if args.events is not None:
-            from .._solver._observe import CONTACT_COLUMNS
-            from ..internal._io import write_csv
-
-            columns = [table[name] for name in CONTACT_COLUMNS]
-            write_csv(args.events, CONTACT_COLUMNS, columns, nan="")
-            lines.append(("wrote", f"{args.events} (contact table: {len(table['t_in'])} contacts)"))
-    except OSError as err:
-        raise RunError(f"cannot write output: {err}") from None
-    for key, value in lines:
-        print(f"{key:<10} {value}")
-    return EXIT_OK
-
-
-# -- command table -------------------------------------------------------------------
-
-
-def _lazy(module: str, name: str):
+def _own_command(module: str, name: str):
     """`add(subparsers)` that imports `module` only when the parser is built."""
 
     def add(subparsers) -> None:
         import importlib
 
-        getattr(importlib.import_module(module), name)(subparsers)
+        getattr(importlib.import_module(module), f"add_{name}")(subparsers)
 
-    add.__name__ = name
     return add
 
 
-#: `simulate <model>`: one function per model that adds its parser.
-_SIMULATE_MODELS = (_add_simulate_ball, _lazy("jaxunilat._cli._coupling", "add_simulate_coupling"))
+def plugin_commands() -> dict:
+    """The commands other packages register in the `jaxunilat.commands` entry-point group:
+    `{name: register}`. One whose package is not installed is left out."""
+    from importlib.metadata import entry_points
+
+    found = {}
+    for point in entry_points(group=COMMANDS_GROUP):
+        try:
+            found[point.name] = point.load()
+        except ModuleNotFoundError as err:
+            top = point.value.split(":")[0].split(".")[0]
+            if err.name is None or err.name.split(".")[0] != top:
+                raise  # the package is there but one of its imports is not: a bug to report
+    return found
 
 
-def _add_simulate(commands) -> None:
-    p = commands.add_parser(
-        "simulate", help="simulate a model and print a summary", description="Simulate a model."
-    )
-    models = p.add_subparsers(dest="model", metavar="MODEL", required=True, parser_class=_Parser)
-    for add in _SIMULATE_MODELS:
-        add(models)
+def _commands() -> list:
+    """Every command's `register(subparsers)`, in `--help` order."""
+    table = {name: _own_command(module, name) for name, module in _COMMANDS}
+    for name, register in plugin_commands().items():
+        table.setdefault(name, register)  # jaxunilat's own command keeps its name
+
+    def rank(name):
+        return (_HELP_ORDER.index(name), "") if name in _HELP_ORDER else (len(_HELP_ORDER), name)
+
+    return [table[name] for name in sorted(table, key=rank)]
 
 
-#: Top-level commands: one function per command that adds its parser.
-_COMMANDS = (
-    _add_simulate,
-    _lazy("jaxunilat._cli._identify", "add_identify"),
-    _lazy("jaxunilat._cli._import", "add_import"),
-    _lazy("jaxunilat._cli._qualify", "add_qualify"),
-    _lazy("jaxunilat._cli._coupling", "add_sensitivity"),
-    _lazy("jaxunilat._cli._coupling", "add_reproduce"),
-    _lazy("jaxunilat._cli._export", "add_export"),
-    _lazy("jaxunilat._cli._bench", "add_bench"),
-)
-
-
-def build_parser() -> argparse.ArgumentParser:
+def build_parser() -> Parser:
     """The full argument parser (errors raise `UsageError`)."""
     from .. import __version__
     from ._compilation_cache import CACHE_DIR_ENV, NO_CACHE_ENV, cache_dir
 
-    parser = _Parser(
+    parser = Parser(
         prog=PROG,
         description="Differentiable simulation of systems with unilateral constraints [K90].",
         epilog=f"Compiled solvers are cached in {cache_dir()} (${CACHE_DIR_ENV} moves it; --no-cache or "
@@ -530,15 +104,57 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="do not use the persistent caches (compiled programs) for this run",
     )
-    commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_Parser)
-    for add in _COMMANDS:
-        add(commands)
+    parser.add_argument("--debug", action="store_true", help="on an internal error, print the full traceback")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=Parser)
+    for register in _commands():
+        register(commands)
     return parser
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
 
 
 def _fail(message: str, code: int) -> int:
     print(f"{PROG}: error: {_one_line(message)}", file=sys.stderr)
     return code
+
+
+def _solver_line(err: RuntimeError) -> str | None:
+    """The solver's own message (`jaxunilat.simulate: ...`) in a runtime error, wherever a
+    wrapper put it (equinox prefixes its class name; JAX puts the traced stack first);
+    None when it carries none."""
+    ours = [m.group(0) for m in re.finditer(r"\bjaxunilat\.\w+: [^\n]*", str(err))]
+    return ours[0] if ours else None
+
+
+def _is_runtime_failure(err: RuntimeError) -> bool:
+    """Whether `err` is a failure of a computation (equinox's or JAX's runtime error, or one
+    carrying the solver's message), not a bug."""
+    kinds = {"EquinoxRuntimeError", "JaxRuntimeError", "XlaRuntimeError"}
+    return _solver_line(err) is not None or any(c.__name__ in kinds for c in type(err).__mro__)
+
+
+def _report(err: BaseException, parser, args, debug: bool) -> int:
+    """Print the one line for an exception that ended a command; its exit code."""
+    flags = None if args is None else command_flags(parser, args)
+
+    def spelled(text: str) -> str:
+        return text if flags is None else cli_spelling(text, flags)
+
+    if isinstance(err, (UsageError, InputError)):
+        return _fail(spelled(str(err)), EXIT_USAGE)
+    if isinstance(err, RunError):
+        return _fail(str(err), EXIT_RUNTIME)
+    if isinstance(err, RuntimeError) and _is_runtime_failure(err):
+        line = _solver_line(err) or (str(err).splitlines() or [type(err).__name__])[0]
+        return _fail(spelled(line), EXIT_RUNTIME)
+    if debug:
+        import traceback
+
+        traceback.print_exception(err)
+    hint = "" if debug else "; rerun with --debug for the traceback"
+    return _fail(f"internal error: {type(err).__name__}: {err} (a bug in {PROG}{hint})", EXIT_INTERNAL)
 
 
 EXIT_INTERRUPTED = 130
@@ -613,17 +229,17 @@ def main(argv: list[str] | None = None) -> int:
     callback_log = logging.getLogger("jax._src.callback")
     callback_level = callback_log.level
     callback_log.setLevel(logging.CRITICAL)
+    words = sys.argv[1:] if argv is None else list(argv)
     parser = args = None
     try:
         from ._environment import check_environment
 
         # Before the parser: building it imports modules that may start JAX's backend
         # (not for help and the version, which compute nothing).
-        words = sys.argv[1:] if argv is None else argv
         if not {"-h", "--help", "--version"} & set(words):
             check_environment(user_xla_flags)
         parser = build_parser()
-        args = parser.parse_args(argv)
+        args = parser.parse_args(words)
         if not args.no_cache:
             from ._compilation_cache import enable_compilation_cache
 
@@ -631,25 +247,11 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args))
     except SystemExit as exc:  # --help, --version
         return exc.code if isinstance(exc.code, int) else EXIT_OK if exc.code is None else EXIT_USAGE
-    except UsageError as err:
-        return _fail(str(err), EXIT_USAGE)
-    except ValueError as err:  # from the API: its keyword hints spelled as flags
-        text = str(err) if args is None else cli_spelling(_named(str(err), args), command_flags(parser, args))
-        return _fail(text, EXIT_USAGE)
-    except RunError as err:
-        return _fail(str(err), EXIT_RUNTIME)
-    except RuntimeError as err:  # EquinoxRuntimeError / JaxRuntimeError from the solver
-        text = str(err)
-        # The solver's own message ("jaxunilat.simulate: ..."), wherever a wrapper put it
-        # (equinox prefixes its class name; JAX puts the traced stack first), never a
-        # traceback's file path.
-        ours = [m.group(0) for m in re.finditer(r"\bjaxunilat\.\w+: [^\n]*", text)]
-        line = (ours or text.splitlines() or [type(err).__name__])[0]
-        if args is not None:
-            line = cli_spelling(line, command_flags(parser, args))
-        return _fail(line, EXIT_RUNTIME)
     except KeyboardInterrupt:
         return _fail("interrupted", EXIT_INTERRUPTED)
+    except Exception as err:
+        debug = args.debug if args is not None else "--debug" in words
+        return _report(err, parser, args, debug)
     finally:
         callback_log.setLevel(callback_level)
         remove_watcher()

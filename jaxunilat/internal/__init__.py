@@ -3,7 +3,8 @@
 Argument validation with messages that name the parameter, the value and the valid
 range; the output-path checks every command runs before any work, and the writer that
 never leaves a partial file; the command line's
-error types and exit codes. `identify` imports only
+error types and exit codes, and how a package registers a `jaxunilat` command
+(`_cli.py`: the `jaxunilat.commands` entry points). `identify` imports only
 jaxunilat's public API and this module (a test checks it), so the two packages depend
 one way.
 
@@ -11,9 +12,27 @@ No stability promise: these names serve the project's own packages and may chang
 between releases.
 """
 
-from ._errors import EXIT_OK as EXIT_OK, PROG as PROG, RunError as RunError, UsageError as UsageError
+from ._cli import (
+    COMMANDS_GROUP as COMMANDS_GROUP,
+    argument_errors as argument_errors,
+    check_plot_format as check_plot_format,
+    input_errors as input_errors,
+    output_errors as output_errors,
+)
+from ._errors import (
+    EXIT_INTERNAL as EXIT_INTERNAL,
+    EXIT_NOT_CONVERGED as EXIT_NOT_CONVERGED,
+    EXIT_OK as EXIT_OK,
+    EXIT_RUNTIME as EXIT_RUNTIME,
+    EXIT_USAGE as EXIT_USAGE,
+    PROG as PROG,
+    InputError as InputError,
+    RunError as RunError,
+    UsageError as UsageError,
+)
 from ._executables import kept_call as kept_call
 from ._io import (
+    bundled_data as bundled_data,
     check_output_dir as check_output_dir,
     check_output_paths as check_output_paths,
     special_kind as special_kind,

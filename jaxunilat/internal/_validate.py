@@ -11,6 +11,8 @@ import math
 import jax
 import numpy as np
 
+from ._errors import InputError
+
 
 def is_concrete(value) -> bool:
     """True when `value` holds numbers now (not a tracer inside a transformation)."""
@@ -28,10 +30,11 @@ def as_float_array(value):
     return np.asarray(value, dtype=np.float64)
 
 
-class InputTypeError(TypeError, ValueError):
+class InputTypeError(TypeError, InputError):
     """A parameter of the wrong type: a string, a complex or boolean number, `None` or
     another object where a real number (or an array of them) goes. Both a `TypeError`
-    and, for code that reports any bad input as a `ValueError`, a `ValueError`."""
+    and, for code that reports any bad input as a `ValueError`, an `InputError` (a
+    `ValueError`)."""
 
 
 def real_number(name: str, value, *, unit: str = ""):
@@ -74,7 +77,7 @@ def float_field(name: str, unit: str = "", *, optional: bool = False):
     (`optional`: `None` passes through, e.g. an absent wall or damping term).
 
     A value with more than one entry (a list, an array of shape (2,), also traced) is
-    refused with a `ValueError`: a model holds one value per parameter, and a batch of
+    refused with an `InputError` (a `ValueError`): a model holds one value per parameter, and a batch of
     models is made with `jax.vmap` or `jaxunilat.sweep` over scalar parameters (their
     rows are scalars there). A shape-(1,) or (1, 1) value is taken as its one entry.
     """
@@ -88,7 +91,7 @@ def float_field(name: str, unit: str = "", *, optional: bool = False):
             if value.size != 1:
                 shown = _short(np.asarray(value).tolist()) if is_concrete(value) else "a traced array"
                 suffix = f" in {unit}" if unit else ""
-                raise ValueError(
+                raise InputError(
                     f"{name} = {shown} has shape {tuple(value.shape)}; valid is one real number{suffix} "
                     "(shape ()); for a batch of models use jax.vmap or jaxunilat.sweep over scalar values"
                 )
@@ -104,16 +107,16 @@ def _values(name, value):
 
 
 def check_finite(name: str, value, *, allow_none: bool = False) -> None:
-    """Raise `ValueError` if a concrete `value` holds NaN or infinity."""
+    """Raise `InputError` (a `ValueError`) if a concrete `value` holds NaN or infinity."""
     if value is None:
         if allow_none:
             return
-        raise ValueError(f"{name} must be given, got None")
+        raise InputError(f"{name} must be given, got None")
     if not is_concrete(value):
         return
     for v in _values(name, value):
         if not math.isfinite(v):
-            raise ValueError(f"{name} = {v} is not finite; it must be a finite number")
+            raise InputError(f"{name} = {v} is not finite; it must be a finite number")
 
 
 def _range_text(lo, hi, lo_open, hi_open) -> str:
@@ -174,7 +177,7 @@ def check_range(
     unit: str = "",
     allow_none: bool = False,
 ) -> None:
-    """Raise `ValueError` naming `name`, the value and the valid range.
+    """Raise `InputError` (a `ValueError`) naming `name`, the value and the valid range.
 
     **Arguments:**
 
@@ -191,7 +194,7 @@ def check_range(
     suffix = f" {unit}" if unit else ""
     for v in _values(name, value):
         if not _within(v, lo, hi, lo_open, hi_open):
-            raise ValueError(f"{name} = {v:g}{suffix} is out of range; valid range is {rng}{suffix}")
+            raise InputError(f"{name} = {v:g}{suffix} is out of range; valid range is {rng}{suffix}")
 
 
 def check_type(name: str, value, cls: type, expected: str) -> None:
@@ -201,7 +204,7 @@ def check_type(name: str, value, cls: type, expected: str) -> None:
 
 
 def check_choice(name: str, value, choices) -> None:
-    """Raise `ValueError` if `value` is not one of `choices`."""
+    """Raise `InputError` (a `ValueError`) if `value` is not one of `choices`."""
     if value not in choices:
         opts = ", ".join(repr(c) for c in choices)
-        raise ValueError(f"{name} = {value!r} is not supported; choose one of {opts}")
+        raise InputError(f"{name} = {value!r} is not supported; choose one of {opts}")

@@ -2,21 +2,24 @@
 
 from __future__ import annotations
 
+from jaxunilat.internal import EXIT_NOT_CONVERGED, InputError
+
 
 def default_data_path() -> str:
     """The bundled default data set, `data/drop_trace.csv` (a synthetic 1 kHz drop test)."""
-    from ..internal._io import bundled_data
+    from jaxunilat.internal import bundled_data
 
     found = bundled_data("drop_trace.csv")
     if found:
         return found[0]
-    raise ValueError(
+    raise InputError(
         "no DATA given and the bundled data/drop_trace.csv was not found (it ships with the source tree); "
         "pass a data file: jaxunilat identify DATA.csv"
     )
 
 
-def add_identify(commands) -> None:
+def register(commands) -> None:
+    """Add `identify` to the `jaxunilat` subparsers (the `jaxunilat.commands` entry point)."""
     p = commands.add_parser(
         "identify",
         help="fit contact stiffness kappa and damping k_r to rebound data, with uncertainty",
@@ -85,62 +88,80 @@ def add_identify(commands) -> None:
     p.set_defaults(func=_run_identify)
 
 
-#: Exit status of a fit that did not converge (its JSON is still written).
-EXIT_NOT_CONVERGED = 3
+def _names(text: str, flag: str, valid, what: str) -> tuple[str, ...]:
+    """The comma-separated names of `flag`, each checked against `valid`."""
+    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    for name in names:
+        if name not in valid:
+            raise InputError(f"{flag} {name!r} is not {what}; valid: {', '.join(valid)}")
+    return names
+
+
+def _checked_arguments(args) -> tuple[tuple[str, ...], tuple[str, ...], list[str]]:
+    """`--fit`, `--freeze` and the data paths, checked with the outputs before any work."""
+    from jaxunilat.internal import check_output_paths, check_plot_format, input_errors
+
+    from .. import NUISANCE, PARAMETERS
+
+    nuisance = _names(args.fit, "--fit", NUISANCE, "a nuisance parameter")
+    freeze = _names(args.freeze, "--freeze", PARAMETERS, "a parameter")
+    if args.starts < 1:
+        raise InputError(f"--starts {args.starts} is out of range; valid range is integers >= 1")
+    if args.seed < 0:
+        raise InputError(f"--seed {args.seed} is out of range; valid range is integers >= 0")
+    paths = list(args.data) or [default_data_path()]
+    inputs = [(f"DATA {i + 1}" if len(paths) > 1 else "DATA", path) for i, path in enumerate(paths)]
+    with input_errors():
+        check_output_paths(("--json", args.json), ("--plot", args.plot), inputs=inputs)
+    check_plot_format(args.plot)
+    return nuisance, freeze, paths
 
 
 def _run_identify(args) -> int:
     import json
 
-    from identify import NUISANCE, PARAMETERS, fit, load_dataset
+    from jaxunilat.internal import argument_errors, input_errors, output_errors, write_atomically
 
-    from ..internal import EXIT_OK, RunError, check_output_paths, write_atomically
-    from ._main import check_plot_format
+    from .. import fit, load_dataset
 
-    nuisance = tuple(name.strip() for name in args.fit.split(",") if name.strip())
-    for name in nuisance:
-        if name not in NUISANCE:
-            raise ValueError(f"--fit {name!r} is not a nuisance parameter; valid: {', '.join(NUISANCE)}")
-    freeze = tuple(name.strip() for name in args.freeze.split(",") if name.strip())
-    for name in freeze:
-        if name not in PARAMETERS:
-            raise ValueError(f"--freeze {name!r} is not a parameter; valid: {', '.join(PARAMETERS)}")
-    if args.starts < 1:
-        raise ValueError(f"--starts {args.starts} is out of range; valid range is integers >= 1")
-    paths = list(args.data) or [default_data_path()]
-    inputs = [(f"DATA {i + 1}" if len(paths) > 1 else "DATA", path) for i, path in enumerate(paths)]
-    check_output_paths(("--json", args.json), ("--plot", args.plot), inputs=inputs)
-    check_plot_format(args.plot)
-    data = [load_dataset(path) for path in paths]
-    result = fit(
-        data if len(data) > 1 else data[0],
-        nuisance=nuisance,
-        freeze=freeze,
-        starts=args.starts,
-        seed=args.seed,
-        method=args.method,
-        profile=args.profile,
-        progress=True,
-        law=args.law,
-        keep_outliers=args.keep_outliers,
-        outlier_threshold=args.outlier_threshold,
-        holdout=args.holdout,
-    )
+    nuisance, freeze, paths = _checked_arguments(args)
+    with input_errors():
+        data = [load_dataset(path) for path in paths]
+    with argument_errors():
+        result = fit(
+            data if len(data) > 1 else data[0],
+            nuisance=nuisance,
+            freeze=freeze,
+            starts=args.starts,
+            seed=args.seed,
+            method=args.method,
+            profile=args.profile,
+            progress=True,
+            law=args.law,
+            keep_outliers=args.keep_outliers,
+            outlier_threshold=args.outlier_threshold,
+            holdout=args.holdout,
+        )
     print(result.report())
-    try:
+    with output_errors():
         if args.json is not None:
             with write_atomically(args.json, encoding="utf-8") as fh:
                 json.dump(result.to_json_dict(), fh, indent=2, allow_nan=False)
             print(f"wrote {args.json}")
         if args.plot is not None:
-            from identify import plot_fit
+            from jaxunilat.plot import save_figure
 
-            from ..plot import save_figure
+            from ..plot import plot_fit
 
             save_figure(plot_fit(result), args.plot)
             print(f"wrote {args.plot}")
-    except OSError as err:
-        raise RunError(f"cannot write output: {err}") from None
+    return _verdict(result)
+
+
+def _verdict(result) -> int:
+    """Print why a fit failed, if it did; its exit status (0, or 3 for a failed fit)."""
+    from jaxunilat.internal import EXIT_OK
+
     if result.contradictions:
         for reason in result.contradictions:
             print(f"rejected: {reason}")

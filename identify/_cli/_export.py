@@ -11,8 +11,9 @@ from __future__ import annotations
 import sys
 
 
-def add_export(commands) -> None:
-    """Add `export` (with its target `mujoco`) to the command table."""
+def register(commands) -> None:
+    """Add `export` (with its target `mujoco`) to the `jaxunilat` subparsers (the
+    `jaxunilat.commands` entry point)."""
     p = commands.add_parser(
         "export",
         help="export identified contact parameters to another simulator",
@@ -57,12 +58,15 @@ def add_export(commands) -> None:
 
 
 def _run_export_mujoco(args) -> int:
-    from identify import DEFAULT_IMPEDANCE, mujoco_contact
+    from jaxunilat.internal import EXIT_OK, PROG, argument_errors
 
-    from ..internal import EXIT_OK, PROG
+    from .. import DEFAULT_IMPEDANCE, mujoco_contact
 
     impedance = DEFAULT_IMPEDANCE if args.impedance is None else args.impedance
-    contact = mujoco_contact(args.fit, mass=args.mass, mode=args.mode, match=args.match, impedance=impedance)
+    with argument_errors():
+        contact = mujoco_contact(
+            args.fit, mass=args.mass, mode=args.mode, match=args.match, impedance=impedance
+        )
     print(contact.mjcf())
     for note in contact.notes:
         print(f"{PROG}: warning: {note}", file=sys.stderr)

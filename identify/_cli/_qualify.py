@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 
-def add_qualify(commands) -> None:
-    """Add the `qualify` command to the `jaxunilat` subparsers."""
-    from identify import DEFAULT_DRAG, DEFAULT_SAMPLES, ITTF_DROP, ITTF_MASS, ITTF_MAX, ITTF_MIN
+def register(commands) -> None:
+    """Add `qualify` to the `jaxunilat` subparsers (the `jaxunilat.commands` entry point)."""
+    from .. import DEFAULT_DRAG, DEFAULT_SAMPLES, ITTF_DROP, ITTF_MASS, ITTF_MAX, ITTF_MIN
 
     p = commands.add_parser(
         "qualify",
@@ -56,13 +56,10 @@ def add_qualify(commands) -> None:
     p.set_defaults(func=_run_qualify)
 
 
-def _run_qualify(args) -> int:
-    import json
-    import time
-
-    from identify import qualify, qualify_fit
-
-    from ..internal import EXIT_OK, RunError, UsageError, check_output_paths, write_atomically
+def _checked_arguments(args) -> None:
+    """Refuse FIT.json together with --kappa/--k-r, neither, or only one of the two, a
+    negative --seed, and bad outputs, before any work."""
+    from jaxunilat.internal import InputError, UsageError, check_output_paths, input_errors
 
     given = args.kappa is not None or args.k_r is not None
     if args.fit is not None and given:
@@ -71,7 +68,21 @@ def _run_qualify(args) -> int:
         raise UsageError("give FIT.json (from `jaxunilat identify --json`) or --kappa K --k-r R")
     if given and (args.kappa is None or args.k_r is None):
         raise UsageError("--kappa and --k-r go together; give both")
-    check_output_paths(("--json", args.json), inputs=(("FIT.json", args.fit),))
+    if args.seed < 0:
+        raise InputError(f"--seed {args.seed} is out of range; valid range is integers >= 0")
+    with input_errors():
+        check_output_paths(("--json", args.json), inputs=(("FIT.json", args.fit),))
+
+
+def _run_qualify(args) -> int:
+    import json
+    import time
+
+    from jaxunilat.internal import EXIT_OK, RunError, argument_errors, write_atomically
+
+    from .. import qualify, qualify_fit
+
+    _checked_arguments(args)
     test = dict(
         drop=args.drop,
         min_height=args.min_height,
@@ -81,13 +92,14 @@ def _run_qualify(args) -> int:
         seed=args.seed,
     )
     start = time.perf_counter()
-    if args.fit is not None:
-        result = qualify_fit(args.fit, mass=args.mass, **test)
-        source = args.fit
-    else:
-        mass = {} if args.mass is None else {"mass": args.mass}
-        result = qualify(args.kappa, args.k_r, **mass, **test)
-        source = "--kappa/--k-r"
+    with argument_errors():
+        if args.fit is not None:
+            result = qualify_fit(args.fit, mass=args.mass, **test)
+            source = args.fit
+        else:
+            mass = {} if args.mass is None else {"mass": args.mass}
+            result = qualify(args.kappa, args.k_r, **mass, **test)
+            source = "--kappa/--k-r"
     wall = time.perf_counter() - start
     print(f"{'parameters':<12}from {source}")
     print(result.report())

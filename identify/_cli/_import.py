@@ -13,6 +13,8 @@ left out as `##` comment lines. The source is only read; an output path that nam
 
 from __future__ import annotations
 
+from jaxunilat.internal import EXIT_NOT_CONVERGED
+
 _X0_IMPACTS = (
     "release height x0, m (default: estimated from the first interval T1 with the e of the interval ratios "
     "(0.95 where they give none) and no drag, x0 = g T1^2 / (8 e^2); the file says so in a ## comment)"
@@ -43,8 +45,9 @@ def _source_kind(sources, kind: str, *, source_help: str, x0_help: str, noise_he
     return p
 
 
-def add_import(commands) -> None:
-    """Add `import` (with its sources `wav`, `phyphox`, `video`) to the command table."""
+def register(commands) -> None:
+    """Add `import` (with its sources `wav`, `phyphox`, `video`) to the `jaxunilat` subparsers
+    (the `jaxunilat.commands` entry point)."""
     p = commands.add_parser(
         "import",
         help="turn a recording (WAV, phyphox export, video-tracking CSV) into a data file",
@@ -138,7 +141,8 @@ def add_import(commands) -> None:
     )
 
 
-EXIT_NOT_A_BALL = 3
+#: Exit status of an import refused as not one bouncing ball's (nothing is written).
+EXIT_NOT_A_BALL = EXIT_NOT_CONVERGED
 
 
 def _detector_options(args) -> dict:
@@ -147,21 +151,27 @@ def _detector_options(args) -> dict:
     return {name: getattr(args, name) for name in names if getattr(args, name, None) is not None}
 
 
+def _plot_import(result, args) -> None:
+    """Draw what was imported into --plot (a WAV's detection, or a table's import)."""
+    from jaxunilat.plot import save_figure
+
+    from ..plot import plot_detection, plot_table_import
+
+    plot = plot_detection if args.source_kind == "wav" else plot_table_import
+    save_figure(plot(result), args.plot)
+    print(f"{'wrote':<10} {args.plot}")
+
+
 def _refused(err, args) -> int:
     """Report an import whose onsets are not a bouncing ball's: the import's summary, the
     reasons, the figure if asked for; nothing written; exit 3."""
-    from ..internal import PROG
+    from jaxunilat.internal import PROG, output_errors
 
     if err.result is not None:
         print(err.result.summary())
         if args.plot is not None:
-            import identify
-
-            from ..plot import save_figure
-
-            plot = identify.plot_detection if args.source_kind == "wav" else identify.plot_table_import
-            save_figure(plot(err.result), args.plot)
-            print(f"{'wrote':<10} {args.plot}")
+            with output_errors():
+                _plot_import(err.result, args)
     for problem in err.problems:
         print(f"{PROG}: not a bouncing ball: {problem}")
     print(
@@ -171,34 +181,40 @@ def _refused(err, args) -> int:
     return EXIT_NOT_A_BALL
 
 
-def _run_import(args) -> int:
-    from ..internal import EXIT_OK, RunError, check_output_paths
-    from ._main import check_plot_format
+def _imported(args):
+    """The import of SOURCE, or the `ImplausibleRecording` that refused it; any other
+    complaint about the recording or the flags is bad input (exit 2)."""
+    from jaxunilat.internal import input_errors
 
-    check_output_paths(("--out", args.out), ("--plot", args.plot), inputs=(("SOURCE", args.source),))
-    check_plot_format(args.plot)
-    import identify
+    from .. import ImplausibleRecording, import_phyphox, import_video, import_wav
 
     common = dict(mass=args.mass, drag=args.drag, x0=args.x0, v0=args.v0, noise=args.noise)
-    try:
-        if args.source_kind == "wav":
-            result = identify.import_wav(args.source, force=args.force, **_detector_options(args), **common)
-        elif args.source_kind == "phyphox":
-            result = identify.import_phyphox(args.source, force=args.force, **common)
-        else:
-            result = identify.import_video(args.source, column=args.column, scale=args.scale, **common)
-    except identify.ImplausibleRecording as err:
-        return _refused(err, args)
+    with input_errors():
+        try:
+            if args.source_kind == "wav":
+                return import_wav(args.source, force=args.force, **_detector_options(args), **common)
+            if args.source_kind == "phyphox":
+                return import_phyphox(args.source, force=args.force, **common)
+            return import_video(args.source, column=args.column, scale=args.scale, **common)
+        except ImplausibleRecording as err:
+            return err
+
+
+def _run_import(args) -> int:
+    from jaxunilat.internal import EXIT_OK, check_output_paths, check_plot_format, input_errors, output_errors
+
+    from .. import ImplausibleRecording
+
+    with input_errors():
+        check_output_paths(("--out", args.out), ("--plot", args.plot), inputs=(("SOURCE", args.source),))
+    check_plot_format(args.plot)
+    result = _imported(args)
+    if isinstance(result, ImplausibleRecording):
+        return _refused(result, args)
     print(result.summary())
-    try:
+    with output_errors():
         result.write(args.out, overwrite=True)
         print(f"{'wrote':<10} {args.out} ({result.dataset.observe}: {result.dataset.num_rows} rows)")
         if args.plot is not None:
-            from ..plot import save_figure
-
-            plot = identify.plot_detection if args.source_kind == "wav" else identify.plot_table_import
-            save_figure(plot(result), args.plot)
-            print(f"{'wrote':<10} {args.plot}")
-    except OSError as err:
-        raise RunError(f"cannot write output: {err}") from None
+            _plot_import(result, args)
     return EXIT_OK

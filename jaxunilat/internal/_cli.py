@@ -1,0 +1,112 @@
+"""What a `jaxunilat` command needs from the command line, also one that another package
+(e.g. `identify`) registers.
+
+**Registering a command.** A package adds commands to `jaxunilat` through the entry-point
+group `jaxunilat.commands` (`COMMANDS_GROUP`), in its `pyproject.toml`:
+
+    [project.entry-points."jaxunilat.commands"]
+    identify = "identify._cli._identify:register"
+
+Each entry point is a function `register(commands) -> None`. `commands` is the
+`argparse` subparsers object of `jaxunilat`; `register` adds one parser named as the
+entry point (`commands.add_parser(name, help=..., description=...)`), its arguments, and
+`set_defaults(func=handler)`, where `handler(args) -> int` runs the command and returns
+its exit code. Keep the module light to import (`jaxunilat --help` builds every parser):
+heavy imports go inside the handler.
+
+**Errors.** A handler raises `UsageError` for arguments that do not go together and
+`InputError` for a value or file the user gave that is invalid (both exit 2; wrap code
+that only reads the user's input in `input_errors()`, which turns its `ValueError`s
+into `InputError`s), `RunError` for a run-time failure (exit 1), and returns
+`EXIT_NOT_CONVERGED` (3) for a fit that failed. Anything else escaping a handler is
+reported as an internal error (exit 1, one line; `jaxunilat --debug` prints the
+traceback).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Iterator
+
+from ._errors import InputError, RunError
+
+#: The entry-point group in which packages register `jaxunilat` commands.
+COMMANDS_GROUP = "jaxunilat.commands"
+
+
+@contextlib.contextmanager
+def input_errors() -> Iterator[None]:
+    """Report a `ValueError` raised inside the block as bad input (an `InputError`, exit 2).
+
+    For code that only checks or reads what the user gave (flags, a data file, a fit's
+    JSON), where every `ValueError` is a complaint about that input; never around a
+    computation, where a `ValueError` is a bug.
+    """
+    try:
+        yield
+    except InputError:
+        raise
+    except ValueError as err:
+        raise InputError(str(err)) from err
+
+
+@contextlib.contextmanager
+def output_errors() -> Iterator[None]:
+    """Report an `OSError` raised inside the block (writing the outputs) as a run-time
+    failure, `cannot write output: ...` (exit 1)."""
+    try:
+        yield
+    except OSError as err:
+        raise RunError(f"cannot write output: {err}") from None
+
+
+def check_plot_format(path: str | os.PathLike | None) -> None:
+    """Refuse a `--plot` file whose suffix matplotlib cannot write, before any work, with
+    an `InputError` (None: no plot asked for)."""
+    if path is None:
+        return
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # ~0.2 s: only when plotting
+
+    suffix = os.path.splitext(os.fspath(path))[1].lstrip(".").lower()
+    if suffix and suffix not in FigureCanvasAgg.get_supported_filetypes():
+        raise InputError(f"--plot {path!r}: unsupported image format {suffix!r}; use e.g. .png, .pdf, .svg")
+
+
+@contextlib.contextmanager
+def argument_errors() -> Iterator[None]:
+    """Around one call of the API: report a `ValueError` with which it rejects its
+    arguments as bad input (an `InputError`, exit 2), and one raised from inside its
+    computation as what it is, a bug.
+
+    The API checks its arguments on concrete values before it computes (`_validate`:
+    under a JAX transformation the checks are left to the run time); a `ValueError`
+    raised while JAX traces the computation (a frame of its traceback holds a tracer)
+    therefore never comes from the checks. Checks that raise `InputError` themselves
+    need no such rule.
+    """
+    try:
+        yield
+    except InputError:
+        raise
+    except ValueError as err:
+        if _raised_while_tracing(err):
+            raise
+        raise InputError(str(err)) from err
+
+
+def _raised_while_tracing(err: BaseException) -> bool:
+    """Whether a frame of `err`'s traceback holds a JAX tracer (as a local or a leaf of one)."""
+    import jax
+
+    tb = err.__traceback__
+    while tb is not None:
+        for value in tb.tb_frame.f_locals.values():
+            try:
+                leaves = jax.tree_util.tree_leaves(value)
+            except Exception:  # an object the tree utilities cannot walk
+                leaves = [value]
+            if any(isinstance(leaf, jax.core.Tracer) for leaf in leaves):
+                return True
+        tb = tb.tb_next
+    return False
