@@ -19,6 +19,7 @@ import pytest
 from helpers import PAPER_Y0
 from reference import BallParams, closed_form_reference, parabola
 
+from jaxunilat import bench
 from jaxunilat._bench import (
     _goals as _bench_goals,
     _main as _bench,
@@ -82,11 +83,11 @@ def test_ratio_goal_takes_the_fastest_run_within_the_error_bound():
         _row("scipy LSODA + events", 9e-10, 0.040, True),
         _row("scipy RK45 + events", 2e-9, 0.010, True),  # fastest peer, not accurate enough
     ]
-    goal = _bench_goals._ratio_goal("P1", rows, 1e-9)
+    goal = _bench_goals._ratio_goal("time_ratio_1e9", rows, 1e-9)
     assert goal["value"] == pytest.approx(0.004 / 0.040)
     assert goal["vs_dop853_events"] == pytest.approx(0.004 / 0.050)
     assert goal["met"] is False  # 0.1 > 1/20
-    assert _bench_goals._ratio_goal("P1", rows[1:2] + rows[2:], 1e-9)["value"] is None
+    assert _bench_goals._ratio_goal("time_ratio_1e9", rows[1:2] + rows[2:], 1e-9)["value"] is None
 
 
 def _user_section(sim_ratio=0.6):
@@ -121,17 +122,94 @@ def _user_section(sim_ratio=0.6):
 
 def test_user_goals_take_their_values_from_the_user_section():
     goals = _bench_goals.user_goals(_user_section())
-    assert [goals[k]["value"] for k in ("P7", "P8", "P9")] == [1.8, 4.0, 0.6]
-    assert [goals[k]["met"] for k in ("P7", "P8", "P9")] == [False, True, False]
+    keys = ("user_vmap_ratio", "user_grad_ratio", "cli_second_run")
+    assert [goals[k]["value"] for k in keys] == [1.8, 4.0, 0.6]
+    assert [goals[k]["met"] for k in keys] == [False, True, False]
     for goal in goals.values():
         assert {"value", "target", "met", "unit", "measured", "reproduce"} <= set(goal)
-    assert goals["P8"]["forward_mode_ratio"] == 1.8
-    assert goals["P9"]["by_command"]["identify"] == 0.5
-    assert goals["P9"]["by_command"]["reproduce"].startswith("skipped")
+    assert goals["user_grad_ratio"]["forward_mode_ratio"] == 1.8
+    assert goals["cli_second_run"]["by_command"]["identify"] == 0.5
+    assert goals["cli_second_run"]["by_command"]["reproduce"].startswith("skipped")
     # A failed command line run: no value, not met.
     failed = _user_section()
     failed["command_line"]["commands"]["simulate"] = {"first_s": 4.0, "second_s": None, "ratio": None}
-    assert _bench_goals.user_goals(failed)["P9"]["met"] is False
+    assert _bench_goals.user_goals(failed)["cli_second_run"]["met"] is False
+    # A section skipped at this size: no value, not met, and the goal says why.
+    skipped = _user_section()
+    skipped["reverse_against_forward"] = {"status": "skipped at size tiny", "ratio": None}
+    goal = _bench_goals.user_goals(skipped)["user_grad_ratio"]
+    assert goal["value"] is None and goal["met"] is False and goal["status"] == "skipped at size tiny"
+
+
+def test_old_bench_json_reads_with_todays_goal_keys(tmp_path):
+    """A bench.json written before the goals had names (P1-P5, P7-P10) loads with today's
+    keys, in its order, the goals' contents untouched; the table prints it."""
+    old_goals = {
+        key: {"value": 0.5, "target": 1.0, "met": True, "unit": "u"}
+        for key in ("P1", "P2", "P3", "P4", "P5", "P7", "P8", "P9", "P10")
+    }
+    old_goals["P3"].update(ratio_vs_scipy_loop=400.0, ratio_target=300.0)
+    old = {"size": "quick", "goals": old_goals, "work_precision": []}
+    path = tmp_path / "bench.json"
+    path.write_text(json.dumps(old))
+    new = bench.load(path)
+    assert list(new["goals"]) == [
+        "time_ratio_1e9",
+        "time_ratio_1e6",
+        "throughput",
+        "gradient_ratio",
+        "compile_time",
+        "user_vmap_ratio",
+        "user_grad_ratio",
+        "cli_second_run",
+        "default_user_ratio",
+    ]
+    assert set(new["goals"]) == set(_bench_goals.GOALS)
+    assert new["goals"]["throughput"] == old_goals["P3"] and new["size"] == "quick"
+    assert bench.upgrade(new) == new  # today's keys stay as they are
+    assert old["goals"] is old_goals and "P1" in old_goals  # the argument is not changed
+    table = bench.goal_table(old)
+    assert "\nthroughput " in table and "ratio against the scipy loop" in table
+    assert not any(line.startswith("P") for line in table.splitlines())
+
+
+def _extra_row(size, log):
+    """A registered row (an entry point's object): called with the size and the log."""
+    log(f"extra at {size.name}")
+    return {"status": "measured", "size": size.name}
+
+
+def test_registered_rows_run_and_missing_ones_say_skipped(monkeypatch):
+    """Rows come from entry points of the group jaxunilat.bench; the expected ones that are
+    not registered, or whose module cannot be imported, say "skipped"."""
+    from importlib.metadata import EntryPoint
+
+    size = _bench.SIZES["tiny"]
+    monkeypatch.setattr(_bench, "registered_rows", dict)
+    rows = _bench._registered(size, print)
+    assert list(rows) == ["identification", "joint_fit"]
+    assert rows["identification"]["rows"] == [] and rows["identification"]["status"].startswith("skipped")
+    assert rows["joint_fit"]["status"].startswith("skipped")
+
+    eps = {
+        "joint_fit": EntryPoint("joint_fit", "no_such_module_anywhere:row", _bench.ROW_GROUP),
+        "extra": EntryPoint("extra", f"{__name__}:_extra_row", _bench.ROW_GROUP),
+    }
+    monkeypatch.setattr(_bench, "registered_rows", lambda: eps)
+    lines = []
+    rows = _bench._registered(size, lines.append)
+    assert list(rows) == ["identification", "joint_fit", "extra"]
+    assert "cannot be loaded" in rows["joint_fit"]["status"]
+    assert rows["extra"] == {"status": "measured", "size": "tiny"} and lines == ["extra at tiny"]
+
+
+def test_identify_registers_its_rows():
+    """The installed metadata names identify's rows, and at the tiny size they skip at once."""
+    eps = _bench.registered_rows()
+    assert {"identification", "joint_fit"} <= set(eps)
+    rows = _bench._registered(_bench.SIZES["tiny"], print)
+    assert rows["identification"] == {"status": "skipped at size tiny", "rows": []}
+    assert rows["joint_fit"] == {"status": "skipped at size tiny"}
 
 
 def test_command_line_children_get_a_new_cache_and_the_users_environment(monkeypatch):
@@ -176,10 +254,12 @@ def test_compiled_peer_without_numba_is_one_line(monkeypatch):
 
 @pytest.mark.slow
 def test_bench_tiny_end_to_end(tmp_path, capsys):
+    """Every section at its smallest; the users' code in fresh processes and its reverse-mode
+    gradient are skipped at this size (`test_command_line_pair_*` runs the processes' pair)."""
     out = tmp_path / "bench"
     assert main(["bench", "--size", "tiny", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
-    for key in ("P1", "P2", "P3", "P4", "P5", "P7", "P8", "P9"):
+    for key in _bench_goals.GOALS:
         assert f"\n{key} " in printed
     for name in ("work_precision.png", "throughput.png"):
         assert (out / name).stat().st_size > 10_000
@@ -187,11 +267,10 @@ def test_bench_tiny_end_to_end(tmp_path, capsys):
 
     # Schema.
     assert {"machine", "goals", "work_precision", "throughput"} <= set(result)
-    for key in ("P1", "P2", "P3", "P4", "P5", "P7", "P8", "P9"):
-        goal = result["goals"][key]
+    assert list(result["goals"]) == list(_bench_goals.GOALS)
+    for goal in result["goals"].values():
         assert {"value", "target", "met", "unit"} <= set(goal)
         assert isinstance(goal["met"], bool)
-    assert "P6" not in result["goals"]
     for row in result["work_precision"]:
         assert {"method", "setting", "error", "wall_s", "compile_s", "peer"} <= set(row)
     for row in result["throughput"]:
@@ -221,14 +300,14 @@ def test_bench_tiny_end_to_end(tmp_path, capsys):
     # The tiny size leaves out the reverse-mode gradient (its compile is the slowest part;
     # tests/test_event_mode.py checks event-mode gradients against FD of the reference) and
     # the 2-device subprocess (tests/test_sweep.py runs it).
-    assert result["gradient"]["losses"] == [] and result["goals"]["P4"]["value"] is None
+    assert result["gradient"]["losses"] == [] and result["goals"]["gradient_ratio"]["value"] is None
     assert result["scale_out"]["rows"] == []
-    # P1 recomputed from the rows.
+    # time_ratio_1e9 recomputed from the rows.
     ok = [r for r in result["work_precision"] if r["error"] is not None and r["error"] <= 1e-9]
     mine = min(r["wall_s"] for r in ok if not r["peer"])
     best_peer = min(r["wall_s"] for r in ok if r["peer"])
-    assert math.isclose(result["goals"]["P1"]["value"], mine / best_peer, rel_tol=1e-12)
-    assert result["goals"]["P3"]["ratio_vs_scipy_loop"] > 0
+    assert math.isclose(result["goals"]["time_ratio_1e9"]["value"], mine / best_peer, rel_tol=1e-12)
+    assert result["goals"]["throughput"]["ratio_vs_scipy_loop"] > 0
     # The compiled-loop peer (Numba), when installed: accurate, with the ratio columns.
     compiled = result["compiled_loop"]
     if compiled["status"] == "measured":
@@ -236,25 +315,42 @@ def test_bench_tiny_end_to_end(tmp_path, capsys):
         assert tight["error"] <= 1e-9 and tight["crossings"] >= 10 and tight["accepted"] > 0
         assert all({"vs_scipy", "vs_compiled"} <= set(r) for r in result["work_precision"] if not r["peer"])
         assert [r["threads"] for r in compiled["throughput"]][0] == 1
-    assert "identification" in result
+    # identify's registered rows, skipped at this size.
+    assert result["identification"]["status"].startswith("skipped") and result["identification"]["rows"] == []
+    assert result["joint_fit"]["status"].startswith("skipped")
 
-    # P7-P9, measured on the users' code (no assertion on the timings themselves).
-    for key in ("P7", "P8", "P9"):
-        goal = result["goals"][key]
-        assert {"measured", "reproduce"} <= set(goal)
-        assert math.isfinite(goal["value"]) and goal["value"] > 0
+    # The users' code: plain vmap measured (no assertion on the timings themselves); the
+    # gradient and the fresh processes skipped at this size, their goals without a value.
+    goal = result["goals"]["user_vmap_ratio"]
+    assert {"measured", "reproduce"} <= set(goal)
+    assert math.isfinite(goal["value"]) and goal["value"] > 0
     user = result["user"]
     assert "jax.jit(jax.vmap(f))" in user["code"] and "jax.grad(loss)" in user["code"]
     vm = user["vmap_against_rows"]
     assert vm["n"] == 4
     assert {"vmap_s", "sequential_s", "vmap_per_row_s", "sequential_per_row_s", "ratio"} <= set(vm)
     assert vm["max_abs_difference_m"] <= 1e-9  # vmapped and one by one: the same rows
-    grad = user["reverse_against_forward"]
-    assert {"forward_s", "reverse_s", "forward_mode_s", "ratio", "forward_mode_ratio"} <= set(grad)
-    assert math.isfinite(grad["forward_mode_ratio"]) and grad["impacts"] >= 3
-    assert grad["modes_max_rel_difference"] <= 1e-6  # jax.grad and jax.jacfwd agree
-    assert result["goals"]["P8"]["forward_mode_ratio"] == grad["forward_mode_ratio"]
-    sim = user["command_line"]["commands"]["simulate"]
-    assert sim["ok"] is True and [r["returncode"] for r in sim["runs"]] == [0, 0]
-    assert sim["runs"][0]["cache_files"] > 0  # the first run filled the new cache
-    assert user["command_line"]["commands"]["reproduce"]["status"].startswith("skipped")
+    for key, section in (
+        ("user_grad_ratio", user["reverse_against_forward"]),
+        ("default_user_ratio", user["default_user"]),
+    ):
+        assert section["status"] == "skipped at size tiny"
+        assert result["goals"][key]["value"] is None and result["goals"][key]["status"] == section["status"]
+    assert result["goals"]["cli_second_run"]["value"] is None
+    assert all(row["status"].startswith("skipped") for row in user["command_line"]["commands"].values())
+
+
+def test_command_line_pair_runs_twice_in_fresh_processes_on_one_new_cache(monkeypatch):
+    """cli_second_run's machinery on a fast command (`jaxunilat --version`): two fresh
+    processes, their walls and the ratio; a failing command is reported, not raised."""
+    monkeypatch.setitem(_bench_user.CLI_COMMANDS, "version", ("--version",))
+    lines = []
+    row = _bench_user._cli_pair("version", lines.append)
+    assert row["ok"] is True and [r["returncode"] for r in row["runs"]] == [0, 0]
+    assert row["command"] == "jaxunilat --version"
+    assert row["ratio"] == pytest.approx(row["second_s"] / row["first_s"])
+    assert "first" in lines[0] and "second" in lines[0]
+    monkeypatch.setitem(_bench_user.CLI_COMMANDS, "bad", ("no-such-command",))
+    row = _bench_user._cli_pair("bad", lines.append)
+    assert row["ok"] is False and row["ratio"] is None and row["runs"][0]["returncode"] == 2
+    assert "failed" in lines[-1]

@@ -212,11 +212,11 @@ def test_default_user_goal_is_the_worse_ratio():
     }
     section["reverse_against_forward"]["forward_mode_ratio"] = 2.0
     section["default_user"] = _default_user_section()
-    goal = bench_goals.user_goals(section)["P10"]
+    goal = bench_goals.user_goals(section)["default_user_ratio"]
     assert goal["value"] == pytest.approx(1.1) and goal["met"] and goal["target"] == 1.2
     assert goal["default_traj_per_s"] == pytest.approx(400 / 0.07)
     section["default_user"] = _default_user_section(default_one=2e-3, kernels=None)
-    goal = bench_goals.user_goals(section)["P10"]
+    goal = bench_goals.user_goals(section)["default_user_ratio"]
     assert goal["value"] == pytest.approx(10.0) and not goal["met"]
     note = bench_goals._default_user_note(goal, missed=True)
     assert note.startswith("missed") and "without the loop-kernel option" in note

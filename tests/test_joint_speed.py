@@ -1,8 +1,8 @@
 """A joint fit of files of one structure compiles its residual program once per contact law.
 
-The files are closed-form quadratic-drag drops (`jaxunilat._bench._joint.throws`, no
-jaxunilat run makes them). The count is the jitted entry point's own cache
-(`identify._problem.evaluate_rows`): one compiled program per law, whatever the number
+The files are closed-form quadratic-drag drops (`identify._bench.throws`, the bench's
+joint-fit workload; no jaxunilat run makes them). The count is the jitted entry point's own cache
+(`identify._fit._problem.evaluate_rows`): one compiled program per law, whatever the number
 of files, starts, windows and passes; files of the same structure fitted later reuse it.
 """
 
@@ -11,9 +11,9 @@ from __future__ import annotations
 import numpy as np
 
 import identify
-from identify._fit import MAX_ALONE_STARTS
-from identify._problem import evaluate_rows
-from jaxunilat._bench._joint import throws
+from identify._bench import throws
+from identify._fit._alone import MAX_ALONE_STARTS
+from identify._fit._problem import evaluate_rows
 
 #: Few bounces and a unique row count: the programs compiled here are this test's own.
 BOUNCES = 7

@@ -11,9 +11,15 @@ repeated runs after a warm-up call (at least `Size.repeats`, more for fast calls
 `run_bench(size)` returns the `bench.json` dictionary; the `jaxunilat bench` command
 (`_cli/_bench.py`) writes it with the figures (`_plot.py`). The peers and the
 reference are in `_peers.py`, the throughput scene and the sharded sweep's timing in
-`_scale.py`, the goals P7–P9 (measured on the users' own code: plain vmap, jax.grad,
-the command line's second run) in `_user.py`, and the goals with their notes in
-`_goals.py`. (There is no P6.)
+`_scale.py`, the goals measured on the users' own code (plain vmap, jax.grad, the
+command line's second run, a default user's script) in `_user.py`, and the goals with
+their notes in `_goals.py`.
+
+Rows that time another package register under the entry-point group `jaxunilat.bench`
+(`ROW_GROUP`): each entry point's name is its key in `bench.json`, and its object a
+callable `row(size, log) -> dict` (`size`: this module's `Size`; `log`: called with each
+printed line). The `identify` package registers `identification` and `joint_fit`
+(`identify/_bench.py`); where a row's package is not installed, the row says "skipped".
 """
 
 from __future__ import annotations
@@ -35,8 +41,8 @@ from collections.abc import Callable
 import numpy as np
 
 from ..internal._io import bundled_data
-from . import _joint as joint, _peers as peers, _user as user
-from ._goals import P1_ERROR, P3_ERROR, goal_table as goal_table, goals
+from . import _peers as peers, _user as user
+from ._goals import THROUGHPUT_ERROR, TIGHT_ERROR, goal_table as goal_table, goals
 from ._scale import SAMPLES, T1, Y0, process_section
 
 
@@ -61,17 +67,21 @@ class Size:
     skip_scenes: tuple[str, ...]
     error_checks: int
     gradient: bool = True  # the gradient section (its reverse-mode compile is the slowest)
-    gradient_pieces: tuple[str, ...] = ("tsit5",)  # P4 is on the first (the default pieces)
+    gradient_pieces: tuple[str, ...] = ("tsit5",)  # gradient_ratio is on the first (the default pieces)
     scale_out: bool = True  # the 1-device against 2-device subprocess
     scale_processes: tuple[int, ...] = (1, 2, 4)  # the sweep over this many processes; (): skip
     identify_sets: int = 0  # bundled data sets to fit (the default one first)
     identify_runs: int = 1  # fits per data set (the first includes compilation)
-    joint_files: int = 0  # joint_fit_30: a cold `identify --law auto` of this many throws (0: skipped)
-    # P7-P9 (`_user.py`): P7's rows, and P9's commands (each run twice in fresh processes).
+    joint_files: int = 0  # joint_fit: a cold `identify --law auto` of this many throws (0: skipped)
+    # The users' code (`_user.py`): user_vmap_ratio's rows, cli_second_run's commands (each
+    # run twice in fresh processes), and whether user_grad_ratio (its reverse-mode compile
+    # is the slowest of the section) and default_user_ratio (two fresh processes) run.
     user_n: int = 1000
     user_cli: tuple[str, ...] = ("simulate", "identify", "reproduce")
+    user_grad: bool = True
+    default_user: bool = True
     # The batch sizes of the throughput's second strategy (vmapped beside one by one);
-    # None: every one of `throughput_ns`; (): none (P7 still times plain vmap against
+    # None: every one of `throughput_ns`; (): none (user_vmap_ratio still times plain vmap against
     # rows one by one, on the users' scene).
     compare_ns: tuple[int, ...] | None = None
     # Fast calls are repeated beyond `repeats` until this much time is spent (at most
@@ -111,7 +121,7 @@ SIZES = {
         skip_scenes=_ALL_SCENES,
         error_checks=3,
         identify_sets=10,
-        joint_files=joint.JOINT_FILES,
+        joint_files=30,
         identify_runs=2,
         gradient_pieces=("tsit5", "dopri8"),
     ),
@@ -136,10 +146,11 @@ SIZES = {
         max_repeats=21,
         user_n=100,
         user_cli=("simulate", "identify"),  # reproduce --quick adds ~15 s: the full size runs it
-        compare_ns=(),  # ~20 s of compiles; P7 times plain vmap against rows one by one
+        compare_ns=(),  # ~20 s of compiles; user_vmap_ratio times plain vmap against rows one by one
         scale_processes=(),  # a process start-up and compile per count (tests/test_distributed_sweep.py)
     ),
-    # Only for the test suite (hidden flag `--size tiny`): every section, smallest settings.
+    # Only for the test suite (hidden flag `--size tiny`): every section, smallest settings;
+    # what other tests cover at their own cost is skipped (each says so in bench.json).
     "tiny": Size(
         name="tiny",
         repeats=2,
@@ -161,8 +172,13 @@ SIZES = {
         scale_out=False,  # tests/test_sweep.py runs the 2-device sweep
         scale_processes=(),  # tests/test_distributed_sweep.py runs 2 and 4 processes
         min_time_s=0.0,
+        compare_ns=(),  # the vmapped sweep beside rows one by one: tests/test_sweep.py
         user_n=4,
-        user_cli=("simulate",),
+        # The users' code in fresh processes and its reverse-mode compile (~90 s on 2 cores):
+        # tests/test_bench.py runs the command-line pair on a fast command.
+        user_cli=(),
+        user_grad=False,
+        default_user=False,
         compiled_tols=(1e-8, 1e-10, 1e-12),
     ),
 }
@@ -259,7 +275,7 @@ def machine() -> dict:
         # (`use_loop_kernels`, which the command line calls); None: XLA's default (1 KiB).
         "loop_kernel_bytes": loop_kernel_bytes(),
         # JAX's persistent compilation cache in this process (the command turns it off: the
-        # bench measures compile times; P9 measures the cache in child processes).
+        # bench measures compile times; cli_second_run measures the cache in child processes).
         "compilation_cache_dir": (
             jax.config.jax_compilation_cache_dir if jax.config.jax_enable_compilation_cache else None
         ),
@@ -481,9 +497,11 @@ def _throughput(size: Size, wp_rows, log) -> tuple[list[dict], dict]:
     checks["max_error_m"] = max(errors)
     checks["rows_checked"] = len(idx)
     if fastest and size.compare_ns == ():
-        checks["vmapped"] = f"left out at size {size.name} (P7 times plain vmap against rows one by one)"
+        checks["vmapped"] = (
+            f"left out at size {size.name} (user_vmap_ratio times plain vmap against rows one by one)"
+        )
     # The scipy loop: the fastest peer whose example-2 error is <= 1e-8 m, over several pairs.
-    ok = [r for r in wp_rows if r["peer"] and r["error"] <= P3_ERROR and "events" in r["method"]]
+    ok = [r for r in wp_rows if r["peer"] and r["error"] <= THROUGHPUT_ERROR and "events" in r["method"]]
     if ok:
         best = min(ok, key=lambda r: r["wall_s"])
         method = best["method"].split()[1]
@@ -593,7 +611,7 @@ def _gradient(size: Size, log) -> dict:
     ts = np.linspace(0.0, T1, SAMPLES)
     out = {
         "scene": "example 2, [0, 2] s, event mode tol 1e-10, theta = (kappa, k_r)",
-        # P4 is taken on the default pieces (Tsit5); other pieces' rows are beside them.
+        # gradient_ratio is taken on the default pieces (Tsit5); other pieces' rows are beside them.
         # Each loss has a row per mode: jax.grad on the default (checkpointed) loop, and
         # jax.jacfwd with autodiff="forward" (a plain loop: one tangent per parameter).
         "losses": [],
@@ -812,52 +830,47 @@ def loop_structure(fn, *args) -> dict:
     return {"loop_body_equations": count_equations(body), "cond_branches": branches}
 
 
-# -- identification (hook) ---------------------------------------------------------------
+# -- rows registered by other packages ------------------------------------------------------
+
+#: The entry-point group of rows that other packages register (see the module's docstring).
+ROW_GROUP = "jaxunilat.bench"
+#: The rows `bench.json` always has, with what each holds when its package is missing:
+#: `identify` registers them (the bench never imports it).
+EXPECTED_ROWS = {"identification": {"rows": []}, "joint_fit": {}}
 
 
-def _data_sets() -> list[str]:
-    """The bundled data sets (`data/*.csv` of the source tree), or none when not shipped."""
+def data_sets() -> list[str]:
+    """The bundled data sets (`data/*.csv` of the source tree, sorted), or [] when not shipped."""
     return bundled_data("*.csv")
 
 
-def _identification(size: Size, log) -> dict:
-    """Wall time of `identify.fit` on each bundled data set (first call with compile, then warm)."""
-    if size.identify_sets == 0:
-        return {"status": f"skipped at size {size.name}", "rows": []}
-    try:
-        import identify
-    except ImportError:
-        return {"status": "skipped: the identify package is not importable", "rows": []}
-    if not hasattr(identify, "fit"):
-        return {"status": "skipped: identify.fit does not exist", "rows": []}
-    paths = _data_sets()
-    if not paths:
-        return {"status": "skipped: the bundled data/ folder was not found", "rows": []}
-    paths = sorted(paths, key=lambda p: not p.endswith("drop_trace.csv"))[: size.identify_sets]
-    rows = []
-    for path in paths:
-        data = identify.load_dataset(path)
-        kwargs = dict(nuisance=("offset",) if data.observe == "impacts" else ())
-        walls, res = [], None
-        for _ in range(size.identify_runs):
-            start = time.perf_counter()
-            res = identify.fit(data, **kwargs)
-            walls.append(time.perf_counter() - start)
-        rows.append(
-            {
-                "data": os.path.basename(path),
-                "observe": data.observe,
-                "fit": "identify.fit(data" + (", nuisance=('offset',))" if kwargs["nuisance"] else ")"),
-                "first_s": walls[0],
-                "warm_s": min(walls[1:]) if len(walls) > 1 else None,
-                "kappa": res.parameters["kappa"]["value"],
-                "k_r": res.parameters["k_r"]["value"],
-                "converged": bool(res.converged),
-            }
-        )
-        warm = "" if rows[-1]["warm_s"] is None else f", warm {rows[-1]['warm_s']:.1f} s"
-        log(f"  identify.fit {rows[-1]['data']}: first call {walls[0]:.1f} s (with compile){warm}")
-    return {"status": "measured", "rows": rows}
+def registered_rows() -> dict:
+    """{name: entry point} of the group `ROW_GROUP`, one per name (the first found)."""
+    from importlib.metadata import entry_points
+
+    found = {}
+    for ep in entry_points(group=ROW_GROUP):
+        found.setdefault(ep.name, ep)
+    return found
+
+
+def _registered(size: Size, log) -> dict:
+    """Every registered row's dict (`EXPECTED_ROWS` first, then the others by name); a row
+    whose entry point cannot be loaded, or that is not registered, says why it was skipped."""
+    eps = registered_rows()
+    out = {}
+    for name in list(EXPECTED_ROWS) + sorted(set(eps) - set(EXPECTED_ROWS)):
+        skipped = {"status": "skipped: not registered (the identify package is not installed)"}
+        if name in eps:
+            try:
+                row = eps[name].load()
+            except (ImportError, AttributeError) as err:
+                skipped = {"status": f"skipped: {eps[name].value} cannot be loaded ({err})"}
+            else:
+                out[name] = row(size, log)
+                continue
+        out[name] = {**skipped, **EXPECTED_ROWS.get(name, {})}
+    return out
 
 
 # -- driver ---------------------------------------------------------------------------------
@@ -866,10 +879,11 @@ def _identification(size: Size, log) -> dict:
 def run_bench(size_name: str = "full", log: Callable[[str], None] = print) -> dict:
     """Run every section at `size_name` ("full", "quick" or "tiny") and return `bench.json`'s dict.
 
-    **Returns:** a dictionary with `machine`, `goals` (P1–P5, P7–P9), `work_precision`,
+    **Returns:** a dictionary with `machine`, `goals` (keyed as in `_goals.GOALS`), `work_precision`,
     `throughput` and further sections (`scale_out`, `scale_processes`, `gradient`, `compile_s`,
-    `no_retrace`, `static_structure`, `profile`, `reference_check`, `identification`,
-    `user`: P7–P9's measurements and the code they time).
+    `no_retrace`, `static_structure`, `profile`, `reference_check`, the registered rows
+    (`identification`, `joint_fit`), `user`: the users' code's measurements and the code
+    they time).
     """
     size = SIZES[size_name]
     ts = np.linspace(0.0, T1, SAMPLES)
@@ -892,7 +906,7 @@ def run_bench(size_name: str = "full", log: Callable[[str], None] = print) -> di
     result["compiled_loop"] = _compiled.bench_section(
         size.compiled_tols,
         max(size.throughput_ns),
-        P1_ERROR,
+        TIGHT_ERROR,
         ts,
         ref.x,
         result["work_precision"],
@@ -914,13 +928,8 @@ def run_bench(size_name: str = "full", log: Callable[[str], None] = print) -> di
     result["static_structure"] = _skip_scenes(size, log)
     result["profile"] = _profile(log)
     result["profile"]["per_step_fit"] = per_step_fit(project)
-    result["identification"] = _identification(size, log)
-    result["joint_fit"] = (
-        joint.joint_fit(log, n=size.joint_files)
-        if size.joint_files
-        else {"status": f"skipped at size {size.name}"}
-    )
-    log("the way users write code (P7-P9):")
+    result.update(_registered(size, log))
+    log("the way users write code:")
     result["user"] = {
         "code": user.USER_CODE,
         "vmap_against_rows": user.vmap_against_rows(size, _timed_together, log),

@@ -1,8 +1,11 @@
-"""The benchmark's figures: work-precision and throughput (from a `bench.json` dictionary)."""
+"""The benchmark's figures: work-precision and throughput (from a `bench.json` dictionary;
+the figures read no goal, so old files draw alike)."""
 
 from __future__ import annotations
 
 import math
+
+from ._goals import GOALS, LOOSE_ERROR, TIGHT_ERROR
 
 
 def _series(rows):
@@ -34,7 +37,7 @@ def work_precision_figure(result: dict):
     for method, (errors, walls, peer) in _series(result["work_precision"] + compiled).items():
         style = dict(ls="--", marker="o") if peer else dict(ls="-", marker="s", lw=2)
         ax.plot(errors, walls, ms=4, color=next(colors), label=method, **style)
-    for key, bound in (("P1", 1e-9), ("P2", 1e-6)):
+    for key, bound in (("time_ratio_1e9", TIGHT_ERROR), ("time_ratio_1e6", LOOSE_ERROR)):
         ax.axvline(bound, color="0.7", lw=0.8, zorder=0)
         ax.text(bound, 1.0, f" {key}", transform=ax.get_xaxis_transform(), va="top", color="0.4")
     ax.set(
@@ -73,7 +76,8 @@ def throughput_figure(result: dict):
         ax.plot(
             [r["n"]], [r["traj_per_s"]], "^", ms=8, label=f"sweep on {r['devices']} device(s), N = {r['n']}"
         )
-    ax.axhline(1e4, color="0.6", lw=0.8, ls=":", label="P3 goal, 1e4 traj/s")
+    target = GOALS["throughput"]["target"]
+    ax.axhline(target, color="0.6", lw=0.8, ls=":", label=f"throughput goal, {target:g} traj/s")
     ax.set(
         xscale="log",
         yscale="log",

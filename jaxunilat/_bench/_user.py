@@ -1,25 +1,25 @@
-"""The benchmark's goals P7–P10, measured the way users write code.
+"""The benchmark's goals measured the way users write code.
 
-One scene for all three: Table 1 example 2 from the lower racket, event mode at
+One scene for all four: Table 1 example 2 from the lower racket, event mode at
 rtol = atol = 1e-10, 201 save times over [0, 1] s, every other option at its default
 (`simulate`'s outputs, buffers and `throw`), written as a user would (`USER_CODE`):
 
-- P7 (`vmap_against_rows`): `jax.jit(jax.vmap(f))` over N values of κ (±20 % about
+- `user_vmap_ratio` (`vmap_against_rows`): `jax.jit(jax.vmap(f))` over N values of κ (±20 % about
   Table 1's) against `jaxunilat.sweep(f, kappas, batch_size=1)`, the rows one by one,
   unbatched, both on the same single device; the ratio of their warm medians. On a CPU
   `simulate`'s batching rule runs the vmapped rows one by one too (`lax.map`, see
   `_batching`; `batching` in the result says which rule ran), so the ratio is about 1;
   with `JAXUNILAT_VMAP=batch` (the GPU rule) the rows run in lockstep, about 2x slower.
-- P8 (`reverse_against_forward`): `jax.jit(jax.grad(loss))` of a misfit (mean square of
+- `user_grad_ratio` (`reverse_against_forward`): `jax.jit(jax.grad(loss))` of a misfit (mean square of
   the trace against data plus mean square of the impact times against the data's) in
   (κ, k_r), against `jax.jit(loss)`, one forward solve of the same run; warm medians.
   Forward mode (`autodiff="forward"` with `jax.jacfwd`) beside it.
-- P9 (`command_line`): wall time of `jaxunilat simulate ball --solver event` run twice,
+- `cli_second_run` (`command_line`): wall time of `jaxunilat simulate ball --solver event` run twice,
   each in a fresh process (`sys.executable -m jaxunilat`) sharing a new, empty cache
   directory (`JAXUNILAT_CACHE_DIR`: the compilation cache and `simulate`'s executables);
   the second against the first.
   `identify` (the bundled data) and `reproduce --quick` likewise, where the size has them.
-- P10 (`default_user`): the default configuration against the tuned one, each in a fresh
+- `default_user_ratio` (`default_user`): the default configuration against the tuned one, each in a fresh
   process (`DEFAULT_USER_CODE`): a plain script that never calls `use_loop_kernels`
   (what `import jaxunilat` sets up is all it gets) against the same script with the
   explicit call first; one `jax.jit(f)` solve and `jax.jit(jax.vmap(f))` over
@@ -42,12 +42,12 @@ import numpy as np
 USER_T1 = 1.0
 USER_SAMPLES = 201
 USER_TOL = 1e-10
-#: κ of P7's rows: Table 1 example 2's, ±20 %.
+#: κ of user_vmap_ratio's rows: Table 1 example 2's, ±20 %.
 KAPPA_SPREAD = 0.2
-#: P8's parameters against those that made its data: κ 10 % higher, k_r 10 % lower.
+#: user_grad_ratio's parameters against those that made its data: κ 10 % higher, k_r 10 % lower.
 MISFIT = (1.1, 0.9)
 
-#: What P7 and P8 time, as a user writes it (`bench.json` carries it as the goals' `reproduce`).
+#: What user_vmap_ratio and user_grad_ratio time, as a user writes it (`bench.json` carries it as the goals' `reproduce`).
 USER_CODE = """\
 import jax, jax.numpy as jnp, numpy as np
 import jaxunilat as ju
@@ -58,11 +58,11 @@ def run(kappa, k_r=0.2, autodiff="reverse"):
                        rtol=1e-10, atol=1e-10, samples=201, autodiff=autodiff)
 def f(kappa):
     return run(kappa).ys["x"]
-# P7: N rows, vmapped against one by one (same device)
+# user_vmap_ratio: N rows, vmapped against one by one (same device)
 kappas = 1e4 * np.linspace(0.8, 1.2, N)
 vmapped = jax.jit(jax.vmap(f)); vmapped(kappas)
 ju.sweep(f, kappas, batch_size=1, devices=jax.devices()[:1])
-# P8: a misfit against data made at (1e4, 0.2), at theta = (1.1e4, 0.18)
+# user_grad_ratio: a misfit against data made at (1e4, 0.2), at theta = (1.1e4, 0.18)
 data = run(1e4); x_obs = data.ys["x"]
 n = int(np.sum(np.isfinite(ju.impact_times(data, 64))))  # the data's impacts
 t_obs = ju.impact_times(data, n)
@@ -75,7 +75,7 @@ jax.jit(jax.jacfwd(lambda th: loss(th, "forward")))(theta)
 """
 
 
-#: P10's script, run as `python -c` in a fresh process: `{setup}` is empty for the
+#: default_user_ratio's script, run as `python -c` in a fresh process: `{setup}` is empty for the
 #: default user, `ju.use_loop_kernels()` for the tuned one; `{n}` rows, `{repeats}` runs.
 DEFAULT_USER_CODE = """\
 import json, statistics, time, warnings
@@ -103,7 +103,7 @@ with warnings.catch_warnings(record=True) as caught:
 print(json.dumps(dict(one_s=one_s, vmap_s=vmap_s, loop_kernel_bytes=ju.debug.loop_kernel_bytes(),
                       warnings=[str(w.message) for w in caught])))
 """
-#: P10's rows (the size's `user_n` where that is below 100: the test suite's tiny size).
+#: default_user_ratio's rows (the size's `user_n` where that is below 100: the test suite's tiny size).
 DEFAULT_USER_N = 400
 
 
@@ -135,24 +135,24 @@ def _timed(fns, size, timed_together):
 
 
 def user_row(kappa):
-    """P7's f: one row, the saved positions (m). A module-level function: `sweep`
+    """user_vmap_ratio's f: one row, the saved positions (m). A module-level function: `sweep`
     caches its compiled program per function object."""
     return _run(kappa).ys["x"]
 
 
 def kappa_rows(n: int) -> np.ndarray:
-    """P7's rows: n values of κ evenly over Table 1 example 2's ±20 % (N/m)."""
+    """user_vmap_ratio's rows: n values of κ evenly over Table 1 example 2's ±20 % (N/m)."""
     from .._models._ball import TABLE1
 
     kappa = TABLE1[2][0]
     return kappa * np.linspace(1.0 - KAPPA_SPREAD, 1.0 + KAPPA_SPREAD, n)
 
 
-# -- P7 -----------------------------------------------------------------------------------
+# -- user_vmap_ratio -----------------------------------------------------------------------------------
 
 
 def vmap_against_rows(size, timed_together, log) -> dict:
-    """P7: `jax.jit(jax.vmap(f))` against `sweep(f, ..., batch_size=1)` on one device."""
+    """user_vmap_ratio: `jax.jit(jax.vmap(f))` against `sweep(f, ..., batch_size=1)` on one device."""
     import jax
 
     from .._solver._batching import batching_mode
@@ -194,7 +194,7 @@ def vmap_against_rows(size, timed_together, log) -> dict:
         "max_abs_difference_m": float(np.max(np.abs(x_vm - x_seq))) if x_vm.shape == x_seq.shape else None,
     }
     log(
-        f"  P7 N = {n}: jit(vmap(f)) {1e6 * out['vmap_per_row_s']:.1f} us/row, sweep(batch_size=1) "
+        f"  user_vmap_ratio N = {n}: jit(vmap(f)) {1e6 * out['vmap_per_row_s']:.1f} us/row, sweep(batch_size=1) "
         f"{1e6 * out['sequential_per_row_s']:.1f} us/row on {out['device']} ({out['batching']} rule): "
         f"ratio {out['ratio']:.2f} "
         f"(compile {out['vmap_compile_s']:.1f} s / {out['sequential_compile_s']:.1f} s)"
@@ -202,11 +202,11 @@ def vmap_against_rows(size, timed_together, log) -> dict:
     return out
 
 
-# -- P8 -----------------------------------------------------------------------------------
+# -- user_grad_ratio -----------------------------------------------------------------------------------
 
 
 def _misfit_data():
-    """The data of P8's misfit: the trace and the impact times at Table 1 example 2's (κ, k_r)."""
+    """The data of user_grad_ratio's misfit: the trace and the impact times at Table 1 example 2's (κ, k_r)."""
     import jax
 
     from .._models._ball import TABLE1
@@ -221,7 +221,10 @@ def _misfit_data():
 
 
 def reverse_against_forward(size, timed_together, log) -> dict:
-    """P8: `jax.jit(jax.grad(loss))` against `jax.jit(loss)` (and `jax.jacfwd` in forward mode)."""
+    """user_grad_ratio: `jax.jit(jax.grad(loss))` against `jax.jit(loss)` (and `jax.jacfwd` in
+    forward mode); skipped where `size.user_grad` is off (its reverse-mode compile is slow)."""
+    if not size.user_grad:
+        return {"status": f"skipped at size {size.name}", "ratio": None}
     import jax
     import jax.numpy as jnp
 
@@ -274,7 +277,7 @@ def reverse_against_forward(size, timed_together, log) -> dict:
         "modes_max_rel_difference": float(np.max(np.abs(g_rev - g_fwd) / np.abs(g_fwd))),
     }
     log(
-        f"  P8 jax.grad(loss) {out['ratio']:.1f}x jax.jit(loss) (forward {1e3 * out['forward_s']:.2f} ms, "
+        f"  user_grad_ratio: jax.grad(loss) {out['ratio']:.1f}x jax.jit(loss) (forward {1e3 * out['forward_s']:.2f} ms, "
         f"reverse {1e3 * out['reverse_s']:.2f} ms, compile {out['reverse_compile_s']:.1f} s); forward mode "
         f"(jax.jacfwd) {out['forward_mode_ratio']:.1f}x; modes agree to {out['modes_max_rel_difference']:.1e}"
     )
@@ -288,9 +291,9 @@ def _scene() -> str:
     )
 
 
-# -- P9 -----------------------------------------------------------------------------------
+# -- cli_second_run -----------------------------------------------------------------------------------
 
-#: P9's commands: name -> the arguments after `jaxunilat` (`{out}`: a folder in the run's
+#: cli_second_run's commands: name -> the arguments after `jaxunilat` (`{out}`: a folder in the run's
 #: working directory, a temporary one; `{data}`: the bundled drop trace).
 CLI_COMMANDS = {
     "simulate": ("simulate", "ball", "--solver", "event"),
@@ -322,7 +325,7 @@ def _child_env(cache: str) -> dict:
 
 
 def _user_process(setup: str, n: int, repeats: int) -> dict:
-    """P10's script (`DEFAULT_USER_CODE`) in a fresh process with the user's environment:
+    """default_user_ratio's script (`DEFAULT_USER_CODE`) in a fresh process with the user's environment:
     `XLA_FLAGS` without the loop-kernel option this process has (the child's import adds
     it again, or its `setup` does), and no opt-out."""
     from .._solver._loop_kernels import OPT_OUT, without_option
@@ -342,9 +345,12 @@ def _user_process(setup: str, n: int, repeats: int) -> dict:
 
 
 def default_user(size, log) -> dict:
-    """P10: the users' plain script (no `use_loop_kernels` call) against the tuned one
-    (the explicit call first), each in a fresh process; default / tuned, the worse of a
-    single `jax.jit(f)` solve and `jax.jit(jax.vmap(f))` over the rows."""
+    """default_user_ratio: the users' plain script (no `use_loop_kernels` call) against the
+    tuned one (the explicit call first), each in a fresh process; default / tuned, the worse
+    of a single `jax.jit(f)` solve and `jax.jit(jax.vmap(f))` over the rows. Skipped where
+    `size.default_user` is off."""
+    if not size.default_user:
+        return {"status": f"skipped at size {size.name}", "ratio": None}
     n = DEFAULT_USER_N if size.user_n >= 100 else size.user_n  # the test suite's tiny size: few rows
     repeats = max(size.repeats, 3)
     default = _user_process("", n, repeats)
@@ -361,13 +367,13 @@ def default_user(size, log) -> dict:
         "ratio": None,
     }
     if "error" in default or "error" in tuned:
-        log(f"  P10 failed: {default.get('error') or tuned.get('error')}")
+        log(f"  default_user_ratio failed: {default.get('error') or tuned.get('error')}")
         return out
     out["one_ratio"] = default["one_s"] / tuned["one_s"]
     out["vmap_ratio"] = default["vmap_s"] / tuned["vmap_s"]
     out["ratio"] = max(out["one_ratio"], out["vmap_ratio"])
     log(
-        f"  P10 default user: one solve {1e3 * default['one_s']:.3f} ms (tuned {1e3 * tuned['one_s']:.3f} ms), "
+        f"  default_user_ratio: default user: one solve {1e3 * default['one_s']:.3f} ms (tuned {1e3 * tuned['one_s']:.3f} ms), "
         f"jit(vmap(f)) {n / default['vmap_s']:.0f} traj/s (tuned {n / tuned['vmap_s']:.0f}): "
         f"ratio {out['ratio']:.2f}"
     )
@@ -375,7 +381,7 @@ def default_user(size, log) -> dict:
 
 
 def _bundled_trace() -> str:
-    """The bundled drop trace for P9's `identify` (the child runs in a temporary folder)."""
+    """The bundled drop trace for cli_second_run's `identify` (the child runs in a temporary folder)."""
     from ..internal._io import bundled_data
 
     found = bundled_data("drop_trace.csv")
@@ -430,11 +436,11 @@ def _cli_pair(name: str, log) -> dict:
     }
     if ok:
         log(
-            f"  P9 {row['command']}: first {row['first_s']:.2f} s, second {row['second_s']:.2f} s "
+            f"  cli_second_run {row['command']}: first {row['first_s']:.2f} s, second {row['second_s']:.2f} s "
             f"(ratio {row['ratio']:.2f}; cache {runs[0]['cache_files']} files, {runs[0]['cache_bytes'] / 1e6:.1f} MB)"
         )
     else:
-        log(f"  P9 {row['command']}: failed: {runs[-1].get('error')}")
+        log(f"  cli_second_run {row['command']}: failed: {runs[-1].get('error')}")
     return row
 
 
@@ -448,16 +454,16 @@ def _import_s() -> float | None:
 
 
 def command_line(size, log) -> dict:
-    """P9: each command of `size.user_cli` twice in fresh processes on a new compilation cache."""
+    """cli_second_run: each command of `size.user_cli` twice in fresh processes on a new compilation cache."""
     out = {
         "how": "each command twice, each a fresh process (sys.executable -m jaxunilat) with "
         "JAXUNILAT_CACHE_DIR a new empty directory for the pair and this process's environment "
         "otherwise (less the CPU device count the bench gave itself); wall time of the process",
-        "import_s": _import_s(),
+        "import_s": _import_s() if set(size.user_cli) & set(CLI_COMMANDS) else None,
         "commands": {},
     }
     if out["import_s"] is not None:
-        log(f"  P9 a fresh process that imports jaxunilat: {out['import_s']:.2f} s")
+        log(f"  cli_second_run: a fresh process that imports jaxunilat: {out['import_s']:.2f} s")
     for name in CLI_COMMANDS:
         if name in size.user_cli:
             out["commands"][name] = _cli_pair(name, log)

@@ -2,13 +2,19 @@
 its goals, and the scipy reference it measures errors against.
 
 `run_bench(size)` returns what `jaxunilat bench` writes to `bench.json`;
-`work_precision(size)` runs only its work–precision section. The peers and the
-reference need scipy (the `bench` extra); importing this module does not load it.
+`work_precision(size)` runs only its work–precision section. `load(path)` reads a
+`bench.json` (files written before the goals had names, keyed P1–P5 and P7–P10, come
+back with today's keys: `upgrade`); `GOALS` holds each goal's target and unit.
+`data_sets()` lists the bundled data sets that rows registered by other packages (entry
+points of the group `jaxunilat.bench`) may fit. The peers and the reference need scipy
+(the `bench` extra); importing this module does not load it.
 """
 
+from .._bench._goals import GOALS as GOALS, OLD_KEYS as OLD_KEYS, load as load, upgrade as upgrade
 from .._bench._main import (
     SIZES as SIZES,
     Size as Size,
+    data_sets as data_sets,
     goal_table as goal_table,
     run_bench as run_bench,
     work_precision as work_precision,
