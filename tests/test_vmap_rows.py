@@ -27,10 +27,6 @@ def _x(kappa, k_r=0.2, solver="event"):
     return _run(kappa, k_r, solver).ys["x"]
 
 
-def _loss(kappa, autodiff="reverse"):
-    return jnp.sum(_run(kappa, autodiff=autodiff).ys["x"])
-
-
 @pytest.fixture(params=PATHS)
 def path(request, monkeypatch):
     monkeypatch.setenv(ENV, request.param)
@@ -85,31 +81,78 @@ def rows(monkeypatch):
     monkeypatch.setenv(ENV, "rows")
 
 
-def test_grad_under_vmap_equals_per_row_grads(rows):
-    grad = jax.jit(jax.grad(_loss))
-    per_row = np.array([grad(k) for k in KAPPAS])
-    assert np.all(per_row != 0)
-    # The value and its gradient (the custom_vjp's forward pass) inside vmap ...
-    values, inside = jax.jit(jax.vmap(jax.value_and_grad(_loss)))(KAPPAS)
-    np.testing.assert_allclose(values, [_loss(k) for k in KAPPAS], rtol=1e-12, atol=0)
-    np.testing.assert_allclose(inside, per_row, rtol=1e-9, atol=0)
-    # ... and the gradient of a vmapped loss.
-    outside = jax.jit(jax.grad(lambda ks: jnp.sum(jax.vmap(_loss)(ks))))(KAPPAS)
-    np.testing.assert_allclose(outside, per_row, rtol=1e-9, atol=0)
+#: The derivative tests' model and span: Table 1 example 2 without drag or upper wall, with
+#: integrated flight: the event mode's smallest program, whose differentiated solves compile
+#: in about half the time of the full ball's. Over 0.3 s each row has its contact with the
+#: lower wall and its flight, in another number of steps per κ.
+def _dloss(kappa, autodiff="reverse"):
+    ball = ju.Ball.table1(2, kappa=kappa, drag=None, upper=None)
+    sol = ju.simulate(
+        ball,
+        Y0,
+        0.3,
+        solver="event",
+        flight="integrated",
+        rtol=1e-8,
+        atol=1e-8,
+        samples=11,
+        autodiff=autodiff,
+    )
+    return jnp.sum(sol.ys["x"])
 
 
-def test_forward_mode_under_vmap_equals_per_row(rows):
-    loss = lambda k: _loss(k, "forward")  # noqa: E731
-    jac = jax.jit(jax.jacfwd(loss))
-    per_row = np.array([jac(k) for k in KAPPAS])
-    assert np.all(per_row != 0)
-    np.testing.assert_allclose(jax.vmap(jax.jacfwd(loss))(KAPPAS), per_row, rtol=1e-9, atol=0)
-    np.testing.assert_allclose(np.diag(jax.jacfwd(jax.vmap(loss))(KAPPAS)), per_row, rtol=1e-9, atol=0)
-    # Reverse mode through a forward-mode solve still says what to do, under vmap too.
+def _distinct(derivatives):
+    """Each row's derivative is non-zero and differs from the others' by far more than the
+    comparisons' tolerance, so that a batched rule mixing the rows up would fail."""
+    d = np.asarray(derivatives)
+    assert np.all(d != 0)
+    gaps = np.abs(d[:, None] - d[None, :])[~np.eye(len(d), dtype=bool)]
+    assert np.all(gaps > 1e-6 * np.max(np.abs(d)))
+
+
+@pytest.fixture(scope="module")
+def per_row():
+    """Each row's loss and dloss/dκ, run alone (no vmap) by `jax.jvp`: the reference of
+    both derivative tests, compiled once. Reverse mode's per-row gradient equals it to
+    ~1e-13 relative (the same arithmetic, differentiated)."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv(ENV, "rows")
+        one = jax.jit(lambda k: jax.jvp(lambda k: _dloss(k, "forward"), (k,), (jnp.ones_like(k),)))
+        values, derivatives = np.array([one(k) for k in KAPPAS]).T
+    _distinct(derivatives)
+    return values, derivatives
+
+
+def test_grad_under_vmap_equals_per_row_grads(rows, per_row):
+    values, derivatives = per_row
+    # The value and its gradient (the custom_vjp's forward pass) inside vmap, and the
+    # gradient of a vmapped loss, in one program.
+    both = jax.jit(
+        lambda ks: (
+            jax.vmap(jax.value_and_grad(_dloss))(ks),
+            jax.grad(lambda ks: jnp.sum(jax.vmap(_dloss)(ks)))(ks),
+        )
+    )
+    (inside_values, inside), outside = both(KAPPAS)
+    np.testing.assert_allclose(inside_values, values, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(inside, derivatives, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(outside, derivatives, rtol=1e-9, atol=0)
+
+
+def test_forward_mode_under_vmap_equals_per_row(rows, per_row):
+    _, derivatives = per_row
+    loss = lambda k: _dloss(k, "forward")  # noqa: E731
+    # jacfwd inside vmap, and the diagonal of a vmapped loss's jacfwd, in one program.
+    both = jax.jit(lambda ks: (jax.vmap(jax.jacfwd(loss))(ks), jnp.diag(jax.jacfwd(jax.vmap(loss))(ks))))
+    inside, outside = both(KAPPAS)
+    np.testing.assert_allclose(inside, derivatives, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(outside, derivatives, rtol=1e-9, atol=0)
+    # Reverse mode through a forward-mode solve still says what to do, under vmap too: the
+    # error comes while the gradient is traced (nothing is compiled).
     with pytest.raises(RuntimeError, match="autodiff='forward' differentiates in forward mode only"):
-        jax.grad(lambda ks: jnp.sum(jax.vmap(loss)(ks)))(KAPPAS)
+        jax.make_jaxpr(jax.grad(lambda ks: jnp.sum(jax.vmap(loss)(ks))))(KAPPAS)
     with pytest.raises(RuntimeError, match="autodiff='forward' differentiates in forward mode only"):
-        jax.grad(loss)(KAPPAS[0])
+        jax.make_jaxpr(jax.grad(loss))(KAPPAS[0])
 
 
 def test_runtime_checks_per_row(path):

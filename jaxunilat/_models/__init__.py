@@ -4,7 +4,9 @@ the closed forms of free flight and of a ball at rest on a wall.
 A model is an `equinox.Module` whose parameters are traced leaves and whose structure
 (walls present, drag on or off, the contact law, the Heaviside option) is static. It
 offers a vector field to the time-stepping solvers and a smooth-region view (switching
-functions, region vector fields, closed-form flight and rest) to the event mode.
+functions, region vector fields, closed-form flight and rest) to the event mode. The
+contract is declared in `_model`: `AbstractModel` and one abstract capability base per
+optional part of the engine, which the solvers test with `isinstance`.
 """
 
 from ._ball import (
@@ -38,4 +40,11 @@ from ._heaviside import (
     Softplus as Softplus,
     heaviside as heaviside,
 )
-from ._model import AbstractModel as AbstractModel
+from ._model import (
+    AbstractCanRest as AbstractCanRest,
+    AbstractClosedFormFlight as AbstractClosedFormFlight,
+    AbstractContactModel as AbstractContactModel,
+    AbstractKinkedObservable as AbstractKinkedObservable,
+    AbstractModel as AbstractModel,
+    AbstractSwitchedModel as AbstractSwitchedModel,
+)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import typing
 from typing import ClassVar
 
 import equinox as eqx
@@ -22,7 +23,12 @@ from ._contact import (
 )
 from ._flight import apex_rise, apex_time, fall_time, flight_state, longest_fall, rise_time
 from ._heaviside import AbstractHeaviside, Exact, Logistic, Softplus
-from ._model import AbstractModel
+from ._model import (
+    AbstractCanRest,
+    AbstractClosedFormFlight,
+    AbstractContactModel,
+    AbstractKinkedObservable,
+)
 
 #: A closed-form flight whose apex is within this many ulps of the upper wall grazes it
 #: without contact (see `Ball.flight_events`).
@@ -44,7 +50,8 @@ TABLE1 = {
 }
 
 
-class Ball(AbstractModel):
+@typing.final
+class Ball(AbstractClosedFormFlight, AbstractCanRest, AbstractKinkedObservable, AbstractContactModel):
     """A ball moving vertically between two walls (rackets) with quadratic air drag.
 
     State y = (x, v): position (m, upward positive, origin mid-way between the

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import abc
 import math
+import typing
 
 import equinox as eqx
 import jax
@@ -58,6 +59,7 @@ class AbstractContactLaw(eqx.Module):
         """The elastic energy stored in the contact, J."""
 
 
+@typing.final
 class KelvinVoigt(AbstractContactLaw):
     """The paper's law: F = κδ + k_r δ̇ H [K90 Eq. 2.4, 3.2]. The default.
 
@@ -80,6 +82,7 @@ class KelvinVoigt(AbstractContactLaw):
         return 0.5 * kappa * pen**2
 
 
+@typing.final
 class ClampedKelvinVoigt(AbstractContactLaw):
     """A spring–damper whose damping force is bounded by the spring force.
 
@@ -102,6 +105,7 @@ class ClampedKelvinVoigt(AbstractContactLaw):
         return 0.5 * kappa * pen**2
 
 
+@typing.final
 class HuntCrossley(AbstractContactLaw):
     """Hunt–Crossley: F = κδⁿ(1 + χδ̇) with χ = k_r/κ, i.e. F = κδⁿ + k_r δⁿ δ̇.
 

@@ -30,6 +30,7 @@ the physical default `params="stiff"` scales κ by 1e5 and k_r by √1e5 (contac
 from __future__ import annotations
 
 import math
+import typing
 import warnings
 from typing import ClassVar
 
@@ -40,7 +41,7 @@ from jaxtyping import Array
 from ..internal._validate import check_choice, float_field
 from ._contact import AbstractContactLaw, ClampedKelvinVoigt, KelvinVoigt, rk4_step_limit
 from ._heaviside import AbstractHeaviside, Exact
-from ._model import AbstractModel
+from ._model import AbstractContactModel, AbstractSwitchedModel
 
 #: The paper's constants [K90 §5.2]: mass (kg), length l (m), diameter d (m), lever l_p (m),
 #: spin-up rate a (1/s), c (dimensionless), gravity (m/s²).
@@ -80,7 +81,8 @@ def polar_inertia(mass, diameter):
     return mass * diameter**2 / 8.0
 
 
-class Coupling(AbstractModel):
+@typing.final
+class Coupling(AbstractSwitchedModel, AbstractContactModel):
     """The rolling-mill coupling with clearance [K90 Eq. 4.5–4.9].
 
     **Arguments:**

@@ -16,6 +16,7 @@ import abc
 import contextlib
 import sys
 import threading
+import typing
 import warnings
 
 import equinox as eqx
@@ -118,6 +119,7 @@ def _warn_if_differentiated_jvp(primals, tangents):
     return primals[0], tangents[0]
 
 
+@typing.final
 class Exact(AbstractHeaviside):
     """The exact step, H(z) = 1 if z > 0 else 0 [K90 Eq. 2.1].
 
@@ -155,6 +157,7 @@ class AbstractSmoothHeaviside(AbstractHeaviside):
         return True
 
 
+@typing.final
 class Logistic(AbstractSmoothHeaviside):
     """Logistic smoothing, H(z) ≈ σ(z/ε), with z·H(z) ≈ z·σ(z/ε).
 
@@ -170,6 +173,7 @@ class Logistic(AbstractSmoothHeaviside):
         return z * jax.nn.sigmoid(z / self.eps)
 
 
+@typing.final
 class Softplus(AbstractSmoothHeaviside):
     """Softplus ramp, z·H(z) ≈ ε·softplus(z/ε), with H(z) ≈ σ(z/ε) its derivative.
 

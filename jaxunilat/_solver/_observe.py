@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
+from .._models._model import AbstractSwitchedModel
 from ._event import ENTRY, EXIT, EXTREMUM, EventRecord
 
 CONTACT_COLUMNS = (
@@ -122,7 +123,8 @@ def contact_table(sol, model=None, *, wall_names: tuple[str, ...] | None = None)
     wall = np.asarray(ev.wall)[:count]
     peak = np.asarray(ev.peak_force)[:count]
     if wall_names is None:
-        wall_names = tuple(getattr(model, "wall_names", ())) or tuple(f"wall{i}" for i in range(8))
+        named = isinstance(model, AbstractSwitchedModel)
+        wall_names = (tuple(model.wall_names) if named else ()) or tuple(f"wall{i}" for i in range(8))
     rows = []
     current = None
     for i in range(count):

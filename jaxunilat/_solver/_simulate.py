@@ -22,7 +22,7 @@ from jaxtyping import Array, ArrayLike
 
 from .._models._contact import RK4_STEPS_PER_CONTACT, HuntCrossley
 from .._models._heaviside import Exact
-from .._models._model import AbstractModel
+from .._models._model import AbstractCanRest, AbstractContactModel, AbstractModel, AbstractSwitchedModel
 from ..internal._executables import kept_call
 from ..internal._validate import (
     InputTypeError,
@@ -220,8 +220,8 @@ def _finish(ys, y1, status, settings, throw, ts, stats, events=None, checks=()):
 
 def _can_rest(model) -> bool:
     """Whether the time-stepping solve looks for a ball at rest (static): the model has
-    a rest criterion (on the class: see `simulate`'s check of `switches`) that can hold."""
-    return hasattr(type(model), "rest_error_fn") and bool(getattr(model, "can_rest", True))
+    a rest criterion (`AbstractCanRest`) that can hold for this instance (`can_rest`)."""
+    return isinstance(model, AbstractCanRest) and bool(model.can_rest)
 
 
 def _rest_event(model, settings: SolverSettings, t1):
@@ -684,21 +684,35 @@ def _check_event_mode(model, max_events) -> None:
     """Refuse a model the event mode cannot solve, and an event buffer beyond
     `MAX_OUTPUT_BYTES` (once per model class, Heaviside option and `max_events`)."""
     plain = type(max_events) is int
-    key = ("event", type(model), type(getattr(model, "heaviside", None)), max_events) if plain else None
+    key = ("event", type(model), _heaviside_type(model), max_events) if plain else None
     _static_once(key, _checked_event_mode, model, max_events)
 
 
+#: Whether a model class is an `AbstractContactModel`, by class: the look-up costs less
+#: than `isinstance` (this runs on every event-mode call).
+_CONTACT_CLASSES: dict[type, bool] = {}
+
+
+def _heaviside_type(model) -> type | None:
+    """The class of the model's Heaviside option; None for a model without one."""
+    cls = type(model)
+    has = _CONTACT_CLASSES.get(cls)
+    if has is None:
+        has = _CONTACT_CLASSES[cls] = issubclass(cls, AbstractContactModel)
+    return type(model.heaviside) if has else None
+
+
 def _checked_event_mode(model, max_events) -> None:
-    heaviside = getattr(model, "heaviside", None)
-    if heaviside is not None and not isinstance(heaviside, Exact):
+    if isinstance(model, AbstractContactModel) and not isinstance(model.heaviside, Exact):
         raise ValueError(
             f"heaviside = {type(model.heaviside).__name__} is not supported with solver='event'; "
             "the event mode solves the exact model: use heaviside=Exact()"
         )
-    # On the class: on the instance, equinox wraps the method in a new bound-method
-    # Module, which costs more than the check itself (this runs on every call).
-    if not hasattr(type(model), "switches"):
-        raise ValueError(f"solver = 'event' is not supported for {type(model).__name__}")
+    if not isinstance(model, AbstractSwitchedModel):
+        raise ValueError(
+            f"solver = 'event' is not supported for {type(model).__name__}: the event mode needs "
+            "an AbstractSwitchedModel (switching functions and region vector fields)"
+        )
     if isinstance(max_events, (int, np.integer)):
         per_event = 8 * (_EVENT_COLUMNS + len(model.state_names))
         if max_events > MAX_OUTPUT_BYTES // per_event:
@@ -723,10 +737,11 @@ def _check_rk4_step(model, dt, y0) -> None:
     found = type(host).rk4_step_limit(host, np, np.asarray(y0))  # no bound-method Module
     step = float(np.max(np.asarray(dt)))
     if found is None:
-        if getattr(model, "num_switches", 0) > 0:
+        if isinstance(model, AbstractSwitchedModel) and model.num_switches > 0:
+            law = type(model.law).__name__ if isinstance(model, AbstractContactModel) else "its law"
             warnings.warn(
                 f"rk4's step dt = {step:g} s is not checked for this "
-                f"{type(model).__name__}: its contact ({type(getattr(model, 'law', None)).__name__}) has no "
+                f"{type(model).__name__}: its contact ({law}) has no "
                 "known step limit, and a step beyond it runs to wrong values with status SUCCESS; "
                 "compare with solver='event', or use solver='tsit5'",
                 UncheckedStepWarning,
@@ -738,7 +753,7 @@ def _check_rk4_step(model, dt, y0) -> None:
         return
     if math.isfinite(t_c) and limit == t_c / RK4_STEPS_PER_CONTACT:
         # Hunt–Crossley stiffens with depth: its t_c is taken at the deepest penetration.
-        stiffens = isinstance(getattr(model, "law", None), HuntCrossley)
+        stiffens = isinstance(model, AbstractContactModel) and isinstance(model.law, HuntCrossley)
         form = "pi/omega at the deepest penetration the initial energy allows" if stiffens else "pi/omega_d"
         why = f"a tenth of the contact time t_c = {form} = {t_c:.3g} s"
     else:
