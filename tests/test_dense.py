@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from jaxunilat._solver import _dense
-from jaxunilat._solver._event import _erk_step
+from jaxunilat._solver._event_pieces import erk_step
 
 SOLVERS = [dfx.Tsit5, dfx.Dopri8]
 
@@ -65,7 +65,7 @@ def test_local_error_order_on_exponential(solver_cls, order):
     hs = [0.4, 0.2, 0.1]
     for h in hs:
         y0 = jnp.array([1.0])
-        _, _, k, _ = _erk_step(solver_cls, f, 0.0, h, y0, f(0.0, y0))
+        _, _, k, _ = erk_step(solver_cls, f, 0.0, h, y0, f(0.0, y0))
         coeffs = _dense.coefficients(solver_cls, k)
         thetas = np.linspace(0.05, 0.95, 19)
         err = max(

@@ -371,7 +371,7 @@ def test_fixed_step_convergence_order_is_at_least_three(ref_ex2):
 
 
 def test_root_finder_reaches_machine_precision_and_differentiates():
-    from jaxunilat._solver._event import _locate
+    from jaxunilat._solver._event_locate import locate as _locate
 
     # Far from the origin float64 spacing is ~1e-13: no tolerance is requested, the
     # bracket just stops shrinking.
@@ -437,13 +437,17 @@ def test_apex_height_gradient_vs_reference_finite_differences():
 def test_save_time_count_matches_numpy_searchsorted(n):
     """A recorded step covers the save times up to its end: their count must agree with
     numpy's searchsorted(side="right"), ties and times beyond either end included."""
-    from jaxunilat._solver._event import _count_at_or_before
+    from jaxunilat._solver._event_output import _count_at_or_before, count_from
 
     rng = np.random.default_rng(n)
     ts = np.sort(rng.uniform(0.0, 2.0, n))
     for t in np.concatenate([ts, rng.uniform(-0.5, 2.5, 50), [-1.0, 3.0]]):
+        expected = np.searchsorted(ts, t, side="right")
         got = int(_count_at_or_before(jnp.asarray(ts), jnp.asarray(t)))
-        assert got == np.searchsorted(ts, t, side="right")
+        assert got == expected
+        # From any count already known (the loop's), windowed and binary alike.
+        for start in {0, expected // 2, max(expected - 1, 0), expected}:
+            assert int(count_from(jnp.asarray(ts), jnp.asarray(start), jnp.asarray(t))) == expected
 
 
 def test_save_time_rows_sequential_and_vectorized_agree():
@@ -451,14 +455,16 @@ def test_save_time_rows_sequential_and_vectorized_agree():
     CPU, vectorized elsewhere) give the same row, contact flag and step for every save
     time, on random records; the row is the last recorded one whose first save time is
     at or before it (its definition)."""
-    from jaxunilat._solver import _event
+    from jaxunilat._solver._event_output import _contact_steps_sequential, _contact_steps_vectorized
+    from jaxunilat._solver._event_state import StepRow
 
     rng = np.random.default_rng(3)
     n_sw, n = 2, 2
-    width = _event._REC + n_sw + n
+    layout = StepRow(n_sw)
+    width = layout.width(n)
 
     def step_to(s, row):
-        return row[_event._REC + n_sw :] * s + row[0]
+        return row[layout.y] * s + row[layout.T0]
 
     for n_ts in (1, 2, 7, 64, 65, 300):
         ts = np.sort(rng.uniform(0.0, 1.0, n_ts))
@@ -466,13 +472,13 @@ def test_save_time_rows_sequential_and_vectorized_agree():
             k = int(rng.integers(1, n_ts + 1))  # recorded rows, each holding >= 1 save time
             firsts = np.concatenate([[0], np.sort(rng.choice(np.arange(1, n_ts), k - 1, replace=False))])
             rec = np.zeros((n_ts + 3, width))
-            rec[:k, 0] = rng.uniform(-1, 0, k)
-            rec[:k, 3] = firsts
-            rec[:k, _event._REC : _event._REC + n_sw] = rng.uniform(size=(k, n_sw)) < 0.3
-            rec[:k, _event._REC + n_sw :] = rng.normal(size=(k, n))
+            rec[:k, layout.T0] = rng.uniform(-1, 0, k)
+            rec[:k, layout.FIRST] = firsts
+            rec[:k, layout.mask] = rng.uniform(size=(k, n_sw)) < 0.3
+            rec[:k, layout.y] = rng.normal(size=(k, n))
             args = (jnp.asarray(rec), jnp.asarray(k), jnp.asarray(ts))
-            seq = _event._contact_steps_sequential(*args, n_sw=n_sw, step_to=step_to)
-            vec = _event._contact_steps_vectorized(*args, n_sw=n_sw, step_to=step_to)
+            seq = _contact_steps_sequential(*args, layout=layout, step_to=step_to)
+            vec = _contact_steps_vectorized(*args, layout=layout, step_to=step_to)
             expected = np.searchsorted(firsts, np.arange(n_ts), side="right") - 1
             np.testing.assert_array_equal(np.asarray(seq[0]), expected)
             for a, b in zip(seq, vec, strict=True):

@@ -20,6 +20,11 @@ a static choice made when the solve is traced, `batching_mode()`: `"rows"` on a 
 environment variable `JAXUNILAT_VMAP` (`rows` or `batch`) forces one, for tests and
 comparisons.
 
+Evaluation (one call, or one row of the map) runs the solve inside a one-iteration
+`while` loop (`in_one_loop`), which XLA:CPU compiles into one kernel under
+`use_loop_kernels`: outside it the program is a handful of thunks, which XLA runs one
+after the other on the calling thread instead of as a task graph on its thread pool.
+
 Autodiff: a `custom_vmap` function has a JVP rule (the JVP of its rule), but JAX can
 neither partially evaluate nor transpose it, so it supports forward mode only.
 
@@ -43,6 +48,8 @@ import os
 from collections.abc import Callable
 
 import jax
+import jax.numpy as jnp
+from jax.extend.core import jaxpr_as_fun, jaxprs_in_params
 
 #: The environment variable that forces a batching rule: "rows" or "batch".
 ENV = "JAXUNILAT_VMAP"
@@ -77,9 +84,62 @@ def rowwise(fn: Callable) -> Callable:
     return call
 
 
+def in_one_loop(fn: Callable, *leaves):
+    """`fn(*leaves)` (flat array leaves in, flat leaves out) computed inside a `while`
+    loop of one iteration that XLA can neither remove nor hoist the work out of.
+
+    XLA:CPU runs a program as a sequence of thunks, and once it holds more than 8 of
+    them and any buffer is over 512 bytes (the outputs at 2001 save times), it runs them
+    as a task graph on its thread pool, at several µs of hand-over per thunk on a busy
+    machine. A loop under `use_loop_kernels`' byte threshold compiles into one kernel,
+    so the whole solve is then one thunk (outside it only the loop's initial values).
+    The trip count passes through an optimization barrier (a known count of one lets
+    XLA inline the loop) and the arguments through another one carried with the loop
+    index (loop-invariant work would be hoisted out of it). `fn` is traced once; its
+    jaxpr is replayed inside the loop.
+    """
+    closed, shapes = jax.make_jaxpr(fn, return_shape=True)(*leaves)
+    out_shapes, out_tree = jax.tree_util.tree_flatten(shapes)
+    replay = jaxpr_as_fun(closed)
+    if _blocks_kernel(closed.jaxpr):
+        # Such a loop would not be one kernel: the plain computation.
+        return jax.tree_util.tree_unflatten(out_tree, replay(*leaves))
+    stop = jax.lax.optimization_barrier(jnp.ones((), jnp.int32))
+
+    def body(carry):
+        i, _ = carry
+        _, args = jax.lax.optimization_barrier((i, list(leaves)))
+        return i + 1, replay(*args)
+
+    init = (jnp.zeros((), jnp.int32), [jnp.zeros(s.shape, s.dtype) for s in out_shapes])
+    out = jax.lax.while_loop(lambda carry: carry[0] < stop, body, init)[1]
+    return jax.tree_util.tree_unflatten(out_tree, out)
+
+
+#: Primitives that keep XLA:CPU from compiling a loop that holds them into one kernel
+#: and that a solve may hold: a host callback (`throw=True`'s error). (Scatters and sorts
+#: do too, but the solve's only ones are in `lax.platform_dependent` branches that a CPU
+#: program leaves out.)
+_NO_KERNEL = ("callback",)
+
+
+def _blocks_kernel(jaxpr) -> bool:
+    """Whether `jaxpr` holds, at any depth, a primitive named like one in `_NO_KERNEL`."""
+    for eqn in jaxpr.eqns:
+        if any(word in eqn.primitive.name for word in _NO_KERNEL):
+            return True
+        for sub in jaxprs_in_params(eqn.params):
+            if _blocks_kernel(sub):
+                return True
+    return False
+
+
 def _flat(fn: Callable, tree) -> Callable:
-    def flat_fn(*leaves):
+    def plain_fn(*leaves):
         return fn(*jax.tree_util.tree_unflatten(tree, leaves))
+
+    def flat_fn(*leaves):
+        return in_one_loop(plain_fn, *leaves)
 
     wrapped = jax.custom_batching.custom_vmap(flat_fn)
 
@@ -89,7 +149,7 @@ def _flat(fn: Callable, tree) -> Callable:
         if not any(in_batched):
             # Only tangents batched (JAX's JVP of this rule): the plain function, which
             # JAX then batches over the tangents alone.
-            out = flat_fn(*leaves)
+            out = plain_fn(*leaves)
             return out, jax.tree_util.tree_map(lambda _: False, out)
         rows = [leaf for leaf, batched in zip(leaves, in_batched, strict=True) if batched]
 

@@ -1,70 +1,14 @@
 """The event mode: exact contact, located and restarted inside one compiled loop.
 
-The exact model is smooth inside each region (free flight, contact with a wall), so
-the loop integrates the region's own smooth right-hand side with an explicit
-Runge–Kutta pair (Tsit5, or Dopri8 for tight tolerances) and stops at every region
-boundary:
-
-1. One loop over steps (`equinox.internal.while_loop`, checkpointed with every step
-   a checkpoint, so it supports `jax.jit`, `jax.vmap` and reverse-mode `jax.grad`;
-   with `autodiff="forward"` a plain loop, for `jax.jvp` and `jax.jacfwd`).
-   Each step uses diffrax's Butcher tableau with the stages unrolled, and the pair's
-   continuous extension (diffrax's interpolant, as a polynomial in θ collected once
-   per step: `_dense`); step-size control is a PI controller on the embedded
-   error estimate (`_event_pieces._step_factor`).
-2. After each accepted step the switching functions g_i (signed distances into the
-   walls) are checked on a sub-grid of the step's dense interpolant, and at the roots
-   of the model's observable (v for the ball: apexes and deepest points). Checking at
-   the extremum catches a crossing that enters and leaves within one step, the free
-   flight pitfall where a parabola's zero error estimate lets a step jump over a wall.
-3. The earliest crossing is located on the interpolant by safeguarded Newton under
-   `stop_gradient` to machine precision, polished by Newton on the pair's own step
-   (the dense output is less accurate than a step), then one differentiable Newton
-   update t* ← t* − g(t*)/ġ(t*) gives the implicit-function gradient of the event time.
-4. The state at t* comes from that step, the region flips, and the step restarts
-   there (FSAL is reset) with the last accepted step size of the previous visit to
-   the new kind of region. With the drag's kink (|v|·v), a piece also ends at every
-   root of v unless the kink's effect over the step is negligible.
-
-5. A contact that can provably never end (a ball resting on the lower wall under
-   gravity: inside the contact the energy about the static deflection never increases,
-   and below the exit threshold the ball cannot get back to the wall; the model's
-   `rest_error`) costs one piece instead of explicit steps at ω = √(κ/m) to t1. After
-   every accepted piece the model bounds the error of its closed form (`rest_state`)
-   over the rest of the span; once that bound is within the tolerance (atol + rtol·|y|,
-   in the model's energy-norm units) the next piece is that closed form, to t1 in one
-   loop iteration (its record row has direction 0, so that the outputs at the save
-   times in it come from the closed form too). For the ball that is
-   the damped oscillator about x = wall − mg/κ (Kelvin–Voigt: exact without drag, and
-   with drag once the drag's effect is provably below the tolerance) or the exact rest
-   state (Hunt–Crossley, once the energy keeps the ball that close to it). Until then
-   the steps go on (the damping brings the bound down); the contact gets no exit, and
-   `EventRecord.rest_time` says from when it provably never ends. The decisions are
-   under `stop_gradient` and the closed forms are plain `jax.numpy`, so the rest is
-   differentiable (the rest position carries the derivatives in κ, m, g) and vmapped
-   (resting rows and flying rows in one batch).
-
-Every event (entry, exit, apex, deepest point) is recorded in a fixed-size buffer,
-and the start (time, state, region) of every accepted step that holds a save time in
-another (at most one row per save time). After the loop each output at a save time s
-is the pair's own step from the start of the recorded step that holds s, of length
-s − t_start (or, in free flight, the model's closed form): as accurate as a step,
-where the dense interpolant inside a long flight step is not (Dopri8 at tol 1e-10:
-7.0e-10 m against 1.5e-9 m over example 2), and a row of 4 + n_sw + n numbers instead
-of the interpolant's 3 + 15n.
-
-Nothing in the loop body is a sort, a scatter or a host callback, so that XLA:CPU can
-compile the whole loop into one kernel (`jaxunilat.use_loop_kernels`). The body picks
-its piece with `lax.cond`s whose branches return one packed array (`packed_cond`:
-XLA:CPU copies every output of a conditional on every call), nested two-way rather
-than one three-way switch (which changed how XLA compiled the other branches).
-
-Layout (as diffrax's `_integrate.py`): this module holds `event_solve`, which sets up
-the static `Problem` and runs the loop, and the loop body (`_body`: one piece, then
-its bookkeeping). The loop's carry is one typed `State` and a piece returns a `Piece`
-(`_event_state`); the pieces are `_event_pieces` (a step of the pair, a closed-form
-flight, a closed-form rest), root finding is `_event_locate`, and the event buffer,
-the step record and the outputs at the save times are `_event_output`.
+Each region (free flight, contact with a wall) is integrated on its own smooth
+right-hand side by an explicit Runge–Kutta pair (or the model's closed forms for free
+flight and for a contact that can never end), and every region boundary is located to
+machine precision and restarted from; the outputs at the save times are steps of the
+pair from recorded step starts. `event_solve` sets up the static `Problem` and runs the
+loop, whose carry is the typed `State` (`_event_state`) and whose body (`_body`) takes
+one piece (`_event_pieces`, root finding in `_event_locate`) and records it
+(`_event_output`). The design, its measurements and what was rejected:
+`jaxunilat/_solver/README.md`, "The event mode".
 """
 
 from __future__ import annotations
@@ -75,34 +19,24 @@ import equinox.internal as eqxi
 import jax.numpy as jnp
 
 from .._models._heaviside import jumps_located
-from ._event_locate import locate as _locate  # noqa: F401 (the tests import it from here)
-from ._event_output import (
-    EventRecord as EventRecord,
-    _contact_steps_sequential as _contact_steps_sequential,
-    _contact_steps_vectorized as _contact_steps_vectorized,
-    _count_at_or_before as _count_at_or_before,
-    event_record,
-    record_event,
-    record_step,
-    save_outputs,
-)
-from ._event_pieces import (
-    PIECE_SOLVERS as PIECE_SOLVERS,
-    erk_step as _erk_step,  # noqa: F401 (the tests import it from here)
-    next_piece,
-)
+from .._models._model import AbstractCanRest, AbstractClosedFormFlight, AbstractKinkedObservable
+from ._event_output import EventRecord as EventRecord, event_record, record_event, record_step, save_outputs
+from ._event_pieces import PIECE_SOLVERS, next_piece
 from ._event_state import (
-    _EV as _EV,
-    _REC as _REC,
     ENTRY as ENTRY,
     EXIT as EXIT,
     EXTREMUM as EXTREMUM,
+    EventRow,
     Piece,
     Problem,
     State,
     initial_state,
     region_index,
 )
+
+#: The event buffer's leading columns before the state (`_simulate` sizes the buffer
+#: with it).
+_EV = EventRow.HEAD
 
 
 def event_solve(model, y0, t0, t1, ts, settings, outputs):
@@ -116,17 +50,17 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
     problem = _problem(model, y0, t0, t1, ts, settings)
     span = t1 - t0
     dt0 = span * 1e-4 if settings.dt is None else settings.dt
-    init = _carry(initial_state(problem, y0, dt0))
+    init = initial_state(problem, y0, dt0)
     max_steps = settings.max_steps
 
-    def cond(carry):
-        return _cond(problem, State(**carry))
+    def cond(state):
+        return _cond(problem, state)
 
-    def body(carry):
-        return _carry(_body(problem, State(**carry)))
+    def body(state):
+        return _body(problem, state)
 
-    def buffers(carry):
-        return [carry["rec"], carry["ev"]]
+    def buffers(state):
+        return [state.rec, state.ev]
 
     # The carry outside the buffers is a few dozen numbers, so every step can be a
     # checkpoint: reverse mode then recomputes nothing.
@@ -137,7 +71,6 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
         final = eqxi.while_loop(
             cond, body, init, max_steps=max_steps, buffers=buffers, kind="checkpointed", checkpoints=max_steps
         )
-    final = State(**final)
     with jumps_located():  # every contact entry and exit is located: no jump term is missed
         ys = save_outputs(problem, final, y0, outputs)
     stats = dict(
@@ -147,18 +80,6 @@ def event_solve(model, y0, t0, t1, ts, settings, outputs):
     )
     done = final.t >= t1
     return ys, final.y, done, final.nonfinite, final.overflow, stats, event_record(final)
-
-
-def _carry(state: State) -> dict:
-    """The loop's carry: the `State`'s fields by name.
-
-    A dict flattens in the order of its keys, so the loop carries the fields in
-    alphabetical order rather than the `State`'s grouped order. XLA:CPU's compiled loop
-    depends on the order of its carry: in forward mode (a plain loop with tangents) the
-    grouped order changed the last bits of the derivatives (4e-12 relative on Table 1
-    example 2), and this order is the one the outputs were first computed with.
-    """
-    return {field.name: getattr(state, field.name) for field in dataclasses.fields(state)}
 
 
 def _problem(model, y0, t0, t1, ts, settings) -> Problem:
@@ -176,12 +97,12 @@ def _problem(model, y0, t0, t1, ts, settings) -> Problem:
         fractions=jnp.linspace(0.0, 1.0, settings.subgrid + 1)[1:],
         solver_cls=solver_cls,
         exponent=exponent,
-        kink=bool(getattr(model, "observable_kink", False)),
+        kink=isinstance(model, AbstractKinkedObservable) and bool(model.observable_kink),
         # A contact that can never end (a ball at rest) in closed form, where the model
         # has one (static): one piece from where that is proven, to t1.
-        settles=hasattr(type(model), "rest_error"),
+        settles=isinstance(model, AbstractCanRest),
         # Free flight in closed form where the model has one (a scene option, static).
-        closed_flight=settings.flight == "closed" and hasattr(type(model), "flight_state"),
+        closed_flight=settings.flight == "closed" and isinstance(model, AbstractClosedFormFlight),
         max_events=settings.max_events,
         # Each save time is in one recorded step, so the steps that hold one fit in
         # len(ts) rows.
@@ -224,10 +145,11 @@ def _record_piece_events(problem: Problem, state: State, piece: Piece) -> State:
     seen = state.seen_extremum | (rec_ext & in_contact)
     peak = jnp.where(accept & in_contact, jnp.maximum(state.peak, piece.f_max), state.peak)
     event = accept & end.crossed
+    # An entry, or an exit with the contact's peak force: one row either way.
+    kind = jnp.where(end.entering, ENTRY, EXIT)
     state = record_event(
-        problem, state, event & ~end.entering, end.t_cross, end.y_cross, EXIT, end.wall, peak
+        problem, state, event, end.t_cross, end.y_cross, kind, end.wall, jnp.where(end.entering, 0.0, peak)
     )
-    state = record_event(problem, state, event & end.entering, end.t_cross, end.y_cross, ENTRY, end.wall, 0.0)
     f_new = problem.contact_force_abs(end.y_cross, end.mask)
     return dataclasses.replace(
         state,

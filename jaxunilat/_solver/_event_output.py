@@ -22,7 +22,7 @@ import jax.numpy as jnp
 from jaxtyping import Array
 
 from ._event_pieces import erk_step
-from ._event_state import _EV, _REC, ENTRY, EXIT, EXTREMUM, Piece, Problem, State
+from ._event_state import ENTRY, EXIT, EXTREMUM, EventRow, Piece, Problem, State, StepRow
 
 
 class EventRecord(eqx.Module):
@@ -64,13 +64,11 @@ class EventRecord(eqx.Module):
 def record_event(problem: Problem, state: State, pred, t, y, kind, wall, peak) -> State:
     """`state` with the event (time t, s; state y; kind; wall; peak force, N) appended
     to the event buffer where `pred`; a full buffer sets `overflow` instead."""
-    dtype = state.y.dtype
     i = state.n_events
     ok = pred & (i < problem.max_events)
-    head = jnp.stack([t, jnp.asarray(kind, dtype), jnp.asarray(wall, dtype), jnp.asarray(peak, dtype)])
     return dataclasses.replace(
         state,
-        ev=eqxi.buffer_at_set(state.ev, i, jnp.concatenate([head, y]), pred=ok),
+        ev=eqxi.buffer_at_set(state.ev, i, EventRow.pack(t, kind, wall, peak, y), pred=ok),
         n_events=i + jnp.where(ok, 1, 0),
         overflow=state.overflow | (pred & (i >= problem.max_events)),
     )
@@ -80,26 +78,25 @@ def record_step(problem: Problem, state: State, piece: Piece) -> State:
     """`state` with the accepted piece's start recorded (valid on [t, t_end]) if a save
     time lies in it. Its direction column is 0 for a resting piece (`_step_to` then
     takes the closed form)."""
-    ts, n_ts, dtype = problem.ts, problem.ts.shape[0], state.y.dtype
+    ts, n_ts = problem.ts, problem.ts.shape[0]
     t_end = piece.end.t_end
     holds = piece.accept & (state.saved < n_ts) & (ts[jnp.minimum(state.saved, n_ts - 1)] <= t_end)
-    first = state.saved.astype(dtype)
     direction = jnp.where(state.resting, 0.0, state.direction) if problem.settles else state.direction
-    row = jnp.concatenate([jnp.stack([state.t, t_end, direction, first]), state.mask.astype(dtype), state.y])
+    row = problem.step_row.pack(state.t, t_end, direction, state.saved, state.mask, state.y)
     return dataclasses.replace(
         state,
         rec=eqxi.buffer_at_set(state.rec, state.n_rec, row, pred=holds & (state.n_rec < problem.rows)),
         n_rec=state.n_rec + jnp.where(holds, 1, 0),
-        saved=jnp.where(holds, _count_at_or_before(ts, t_end), state.saved),
+        saved=jnp.where(holds, count_from(ts, state.saved, t_end), state.saved),
     )
 
 
 def _step_to(problem: Problem, s, row):
     """The state at save time s (s) from a recorded row: the pair's step of length
     s − t_start, or a resting row's closed form."""
-    n_sw = problem.n_sw
-    t_st, sign = row[0], row[2]
-    mask, y_st = row[_REC : _REC + n_sw] != 0, row[_REC + n_sw :]
+    layout = problem.step_row
+    t_st, sign = row[layout.T0], row[layout.DIRECTION]
+    mask, y_st = row[layout.mask] != 0, row[layout.y]
 
     def piece_rhs(tt, z):
         return problem.rhs(tt, z, mask, sign)
@@ -120,18 +117,18 @@ def save_outputs(problem: Problem, final: State, y0, outputs) -> dict:
     is much less accurate inside Dopri8's long flight steps), and in free flight the
     closed form from there.
     """
-    model, ts, n_sw, rec = problem.model, problem.ts, problem.n_sw, final.rec
+    model, ts, layout, rec = problem.model, problem.ts, problem.step_row, final.rec
     step_to = functools.partial(_step_to, problem)
     if problem.closed_flight:
         # Steps of the pair only at the times in contact (the contacts last milliseconds).
-        index, contact, y_contact = _contact_steps(rec, final.n_rec, ts, n_sw, step_to)
+        index, contact, y_contact = _contact_steps(rec, final.n_rec, ts, layout, step_to)
         held = rec[index]
-        t_start, direction = held[:, 0], held[:, 2]
+        t_start, direction = held[:, layout.T0], held[:, layout.DIRECTION]
         tau = jnp.where(contact, 0.0, ts - t_start)
-        y_flight = jax.vmap(model.flight_state)(held[:, _REC + n_sw :], tau, direction)
+        y_flight = jax.vmap(model.flight_state)(held[:, layout.y], tau, direction)
         y = jnp.where(contact[:, None], y_contact, y_flight)
     else:
-        y = jax.vmap(step_to)(ts, rec[_rows_of_times(rec, final.n_rec, ts.shape[0])])
+        y = jax.vmap(step_to)(ts, rec[_rows_of_times(rec, final.n_rec, ts.shape[0], layout)])
     y = jnp.where((ts == problem.t0)[:, None], y0, y)
     ys = {name: jax.vmap(lambda s, z, name=name: model.output(name, s, z))(ts, y) for name in outputs}
     reached = ts <= final.t
@@ -142,14 +139,32 @@ def event_record(final: State) -> EventRecord:
     """The `EventRecord` of the final loop state."""
     ev = final.ev
     return EventRecord(
-        t=ev[:, 0],
-        y=ev[:, _EV:],
-        kind=ev[:, 1].astype(jnp.int32),
-        wall=ev[:, 2].astype(jnp.int32),
-        peak_force=ev[:, 3],
+        t=ev[:, EventRow.T],
+        y=ev[:, EventRow.Y],
+        kind=ev[:, EventRow.KIND].astype(jnp.int32),
+        wall=ev[:, EventRow.WALL].astype(jnp.int32),
+        peak_force=ev[:, EventRow.PEAK],
         count=final.n_events,
         open_peak_force=final.peak,
         rest_time=final.rest_time,
+    )
+
+
+#: Save times `count_from` compares at once, from the last count on.
+_WINDOW = 32
+
+
+def count_from(ts, start, t):
+    """How many of the sorted save times `ts` are ≤ t (s), given that the first `start`
+    are: one vectorized comparison of the next `_WINDOW` times, and the binary search
+    `_count_at_or_before` only where all of them are ≤ t (a piece longer than that)."""
+    ts, t = jax.lax.stop_gradient(ts), jax.lax.stop_gradient(t)
+    n = ts.shape[0]
+    width = min(_WINDOW, n)
+    lo = jnp.minimum(start, n - width)  # the times before lo are <= t too
+    count = lo + jnp.sum(jax.lax.dynamic_slice_in_dim(ts, lo, width) <= t, dtype=start.dtype)
+    return jax.lax.cond(
+        (count == lo + width) & (lo + width < n), lambda: _count_at_or_before(ts, t), lambda: count
     )
 
 
@@ -168,18 +183,18 @@ def _count_at_or_before(ts, t):
     return jax.lax.while_loop(lambda state: state[0] < state[1], body, start)[0]
 
 
-def _rows_of_times(rec, n_rec, n_ts):
+def _rows_of_times(rec, n_rec, n_ts, layout: StepRow):
     """The recorded row that holds each save time. Rows hold consecutive runs of save
-    times (column 3: the index of a row's first one), so marking where each run starts
-    and counting the marks gives every time its row."""
+    times (column `FIRST`: the index of a row's first one), so marking where each run
+    starts and counting the marks gives every time its row."""
     rows = rec.shape[0]
-    starts = jax.lax.stop_gradient(rec[1:, 3]).astype(jnp.int32)
+    starts = jax.lax.stop_gradient(rec[1:, layout.FIRST]).astype(jnp.int32)
     later = jnp.arange(1, rows) < n_rec
     marks = jnp.zeros(n_ts, jnp.int32).at[jnp.where(later, starts, n_ts)].add(1, mode="drop")
     return _running_sum(marks)
 
 
-def _contact_steps(rec, n_rec, ts, n_sw, step_to):
+def _contact_steps(rec, n_rec, ts, layout: StepRow, step_to):
     """For each save time: its recorded row, whether that row is a contact, and there the
     pair's step from the row's start (`step_to(s, row)`; zeros at times in flight).
 
@@ -191,23 +206,23 @@ def _contact_steps(rec, n_rec, ts, n_sw, step_to):
         rec,
         n_rec,
         ts,
-        cpu=functools.partial(_contact_steps_sequential, n_sw=n_sw, step_to=step_to),
-        default=functools.partial(_contact_steps_vectorized, n_sw=n_sw, step_to=step_to),
+        cpu=functools.partial(_contact_steps_sequential, layout=layout, step_to=step_to),
+        default=functools.partial(_contact_steps_vectorized, layout=layout, step_to=step_to),
     )
 
 
-def _row_facts(rec, n_sw):
+def _row_facts(rec, layout: StepRow):
     """(index of each row's first save time, whether each row is a contact)."""
     rec = jax.lax.stop_gradient(rec)
-    return rec[:, 3].astype(jnp.int32), jnp.any(rec[:, _REC : _REC + n_sw] != 0, axis=1)
+    return rec[:, layout.FIRST].astype(jnp.int32), jnp.any(rec[:, layout.mask] != 0, axis=1)
 
 
-def _contact_steps_sequential(rec, n_rec, ts, *, n_sw, step_to):
+def _contact_steps_sequential(rec, n_rec, ts, *, layout: StepRow, step_to):
     """`_contact_steps` as one scan over the save times: each time's row is the previous
     time's or the next one (every recorded row holds at least one save time), and a step
     is taken only at the times in contact."""
-    n = rec.shape[1] - _REC - n_sw
-    firsts, in_contact = _row_facts(rec, n_sw)
+    n = rec.shape[1] - layout.width(0)
+    firsts, in_contact = _row_facts(rec, layout)
     last = jnp.maximum(n_rec - 1, 0)
 
     def body(r, s_and_p):
@@ -220,13 +235,13 @@ def _contact_steps_sequential(rec, n_rec, ts, *, n_sw, step_to):
     return jax.lax.scan(body, jnp.zeros((), jnp.int32), (ts, jnp.arange(ts.shape[0])))[1]
 
 
-def _contact_steps_vectorized(rec, n_rec, ts, *, n_sw, step_to, few=64):
+def _contact_steps_vectorized(rec, n_rec, ts, *, layout: StepRow, step_to, few=64):
     """`_contact_steps` without a loop over the save times: the rows by
     `_rows_of_times`, and the times in contact gathered into chunks of `few`, a chunk
     with none skipped."""
-    n_ts, n = ts.shape[0], rec.shape[1] - _REC - n_sw
-    index = _rows_of_times(rec, n_rec, n_ts)
-    contact = _row_facts(rec, n_sw)[1][index]
+    n_ts, n = ts.shape[0], rec.shape[1] - layout.width(0)
+    index = _rows_of_times(rec, n_rec, n_ts, layout)
+    contact = _row_facts(rec, layout)[1][index]
     size = min(n_ts, few)
     chunks = -(-n_ts // size)
     count = jnp.cumsum(contact)

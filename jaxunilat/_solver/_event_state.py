@@ -22,8 +22,52 @@ from . import _dense
 
 #: Event kinds in `EventRecord.kind`.
 ENTRY, EXIT, EXTREMUM = 1, 2, 3
-_REC = 4  # leading columns of a step record: t0, t_end, direction, first save time (then mask, y0)
-_EV = 4  # leading columns of an event record: t, kind, wall, peak force
+
+
+class EventRow:
+    """Columns of a row of the event buffer (`State.ev`): the event's time (s), kind,
+    wall and peak contact force (N), then its state y."""
+
+    T, KIND, WALL, PEAK = 0, 1, 2, 3
+    HEAD = 4  # the leading columns; y follows
+    Y = slice(HEAD, None)
+
+    @staticmethod
+    def pack(t, kind, wall, peak, y):
+        """One row (`y`'s dtype)."""
+        dtype = y.dtype
+        head = [jnp.asarray(v, dtype) for v in (t, kind, wall, peak)]
+        return jnp.concatenate([jnp.stack(head), y])
+
+
+@typing.final
+class StepRow(eqx.Module):
+    """Columns of a row of the step record (`State.rec`): the recorded piece's start
+    t0 and end (s), the observable's sign in it (0: a resting piece), the index of its
+    first save time, then its region's mask (n_sw) and the state y0 at t0 (n)."""
+
+    n_sw: int = eqx.field(static=True)
+
+    T0, T_END, DIRECTION, FIRST = 0, 1, 2, 3
+    HEAD = 4  # the leading columns; mask and y0 follow
+
+    @property
+    def mask(self) -> slice:
+        return slice(self.HEAD, self.HEAD + self.n_sw)
+
+    @property
+    def y(self) -> slice:
+        return slice(self.HEAD + self.n_sw, None)
+
+    def width(self, n: int) -> int:
+        """Columns of a row for a state of n components."""
+        return self.HEAD + self.n_sw + n
+
+    def pack(self, t0, t_end, direction, first, mask, y):
+        """One row (`y`'s dtype)."""
+        dtype = y.dtype
+        head = jnp.stack([jnp.asarray(v, dtype) for v in (t0, t_end, direction, first)])
+        return jnp.concatenate([head, mask.astype(dtype), y])
 
 
 @typing.final
@@ -55,6 +99,11 @@ class Problem(eqx.Module):
     def n_sw(self) -> int:
         """The number of switching functions (walls)."""
         return self.model.num_switches
+
+    @property
+    def step_row(self) -> StepRow:
+        """The columns of the step record's rows."""
+        return StepRow(self.n_sw)
 
     def rhs(self, t, y, mask, direction):
         """The smooth right-hand side of a region (`mask`) and sign of the observable.
@@ -118,15 +167,15 @@ class State(eqx.Module):
     seen_extremum: Array  # its deepest point is recorded
     peak: Array  # its running peak |contact force|, N
     # -- event buffer ---------------------------------------------------------------
-    # One row per event: [t, kind, wall, peak force, y (n)]; a contact open at t0 is
-    # recorded as an entry at t0. Padding: t = +inf.
+    # One row per event (columns: `EventRow`); a contact open at t0 is recorded as an
+    # entry at t0. Padding: t = +inf.
     ev: Array
     n_events: Array
     overflow: Array  # an event found no free row
     # -- step record, for the outputs at the save times ------------------------------
-    # One row per accepted step that holds a save time (at most one per save time):
-    # [t0, t_end, direction, index of its first save time, mask (n_sw), y0 (n)], enough
-    # to take the piece's step from t0 to any time in [t0, t_end] (unused rows: zeros);
+    # One row per accepted step that holds a save time (at most one per save time;
+    # columns: `StepRow`), enough to take the piece's step from t0 to any time in
+    # [t0, t_end] (unused rows: zeros);
     # `saved` save times lie at or before the last recorded step's end.
     rec: Array
     n_rec: Array
@@ -227,8 +276,7 @@ def initial_state(problem: Problem, y0, dt0) -> State:
         proven0, resting0 = problem.rest_bound(y0, mask0, t0)
     else:
         proven0 = resting0 = jnp.array(False)
-    head = [t0, jnp.asarray(ENTRY, dtype), jnp.argmax(mask0).astype(dtype), jnp.asarray(0.0, dtype)]
-    first_event = jnp.concatenate([jnp.stack(head), y0])
+    first_event = EventRow.pack(t0, ENTRY, jnp.argmax(mask0), 0.0, y0)
     return State(
         t=t0,
         y=y0,
@@ -245,11 +293,13 @@ def initial_state(problem: Problem, y0, dt0) -> State:
         ev=jnp.where(
             (jnp.arange(problem.max_events)[:, None] == 0) & start_in_contact,
             first_event,
-            jnp.zeros((problem.max_events, _EV + y0.shape[0]), dtype).at[:, 0].set(jnp.inf),
+            jnp.zeros((problem.max_events, EventRow.HEAD + y0.shape[0]), dtype)
+            .at[:, EventRow.T]
+            .set(jnp.inf),
         ),
         n_events=jnp.where(start_in_contact, 1, 0),
         overflow=jnp.array(False),
-        rec=jnp.zeros((problem.rows, _REC + n_sw + y0.shape[0]), dtype),
+        rec=jnp.zeros((problem.rows, problem.step_row.width(y0.shape[0])), dtype),
         n_rec=jnp.array(0),
         saved=jnp.array(0),
         n_steps=jnp.array(0),
