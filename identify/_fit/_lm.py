@@ -8,9 +8,9 @@ it returns an `LMPoint`.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
-import equinox as eqx
 import numpy as np
 
 #: Levenberg–Marquardt damping divisor after an accepted step. Along the κ–k_r ridge
@@ -22,7 +22,8 @@ LAMBDA_DOWN = 10.0
 STALL_STEPS, STALL_CHI2 = 10, 0.1
 
 
-class LMPoint(eqx.Module):
+@dataclasses.dataclass(frozen=True)
+class LMPoint:
     """Where a Levenberg–Marquardt run stopped.
 
     **Fields:** `z`, the joint point; `r` and `jac`, the residuals and Jacobian there

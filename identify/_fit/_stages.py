@@ -43,31 +43,17 @@ MAX_OUTLIER_FRACTION = 0.2
 
 
 @dataclasses.dataclass(frozen=True)
-class Point:
-    """Where a stage left the fit: the joint z, its residuals, Jacobian and cost, the LM
-    iterations and gradient steps spent to get there, and the last stop's verdict."""
+class Point(LMPoint):
+    """Where a stage left the fit: an `LMPoint` whose `iterations` count every LM stage
+    that led there, and the gradient steps spent on the way."""
 
-    z: np.ndarray
-    r: np.ndarray
-    jac: np.ndarray
-    cost: float
-    iterations: int
-    converged: bool
-    why: str
     gradient_steps: int = 0
 
     @classmethod
     def from_lm(cls, out: LMPoint, *, iterations: int = 0, gradient_steps: int = 0) -> Point:
-        return cls(
-            out.z,
-            out.r,
-            out.jac,
-            out.cost,
-            iterations + out.iterations,
-            out.converged,
-            out.why,
-            gradient_steps,
-        )
+        fields = {f.name: getattr(out, f.name) for f in dataclasses.fields(LMPoint)}
+        fields["iterations"] += iterations
+        return cls(**fields, gradient_steps=gradient_steps)
 
     def then(self, out: LMPoint) -> Point:
         """The point a further LM stage `out` reached, its iterations added to these."""

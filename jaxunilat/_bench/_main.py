@@ -794,6 +794,21 @@ def _profile(log) -> dict:
     return out
 
 
+def _loop_floor(size: Size, log) -> dict:
+    """The floor under a step attempt (`_floor.loop_floor`), left out at size tiny."""
+    if size.name == "tiny":
+        return {"how": "skipped at size tiny"}
+    from ._floor import loop_floor
+
+    out = loop_floor()
+    log(
+        f"  floor: an empty while-loop iteration {out['empty_iteration_ns']:.1f} ns "
+        f"({out['empty_row_iteration_vmap_ns']:.2f} ns a row vmapped); an event-mode step attempt "
+        f"{out['event_attempt_ns']:.0f} ns ({out['event_row_attempt_vmap_ns']:.0f} ns a row-attempt vmapped)"
+    )
+    return out
+
+
 def loop_structure(fn, *args) -> dict:
     """Equation counts of the largest while loop's body in `fn`'s jaxpr, and of its conds' branches."""
     import equinox as eqx
@@ -928,6 +943,7 @@ def run_bench(size_name: str = "full", log: Callable[[str], None] = print) -> di
     result["static_structure"] = _skip_scenes(size, log)
     result["profile"] = _profile(log)
     result["profile"]["per_step_fit"] = per_step_fit(project)
+    result["profile"]["loop_floor"] = _loop_floor(size, log)
     result.update(_registered(size, log))
     log("the way users write code:")
     result["user"] = {

@@ -26,17 +26,12 @@ from ._event_state import (
     ENTRY as ENTRY,
     EXIT as EXIT,
     EXTREMUM as EXTREMUM,
-    EventRow,
     Piece,
     Problem,
     State,
     initial_state,
     region_index,
 )
-
-#: The event buffer's leading columns before the state (`_simulate` sizes the buffer
-#: with it).
-_EV = EventRow.HEAD
 
 
 def event_solve(model, y0, t0, t1, ts, settings, outputs):

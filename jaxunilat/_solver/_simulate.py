@@ -36,7 +36,8 @@ from ..internal._validate import (
 from . import _loop_kernels
 from ._batching import batching_mode, rowwise_differentiable
 from ._device_cache import DeviceCache
-from ._event import _EV as _EVENT_COLUMNS, EventRecord, event_solve
+from ._event import EventRecord, event_solve
+from ._event_state import EventRow
 from ._settings import SolverSettings, failure_hints, make_settings
 
 #: The most memory `simulate` lets one run's save times and outputs (or the event
@@ -714,7 +715,7 @@ def _checked_event_mode(model, max_events) -> None:
             "an AbstractSwitchedModel (switching functions and region vector fields)"
         )
     if isinstance(max_events, (int, np.integer)):
-        per_event = 8 * (_EVENT_COLUMNS + len(model.state_names))
+        per_event = 8 * (EventRow.HEAD + len(model.state_names))
         if max_events > MAX_OUTPUT_BYTES // per_event:
             raise ValueError(
                 f"max_events = {max_events!r} is out of range: the event buffer would take "
