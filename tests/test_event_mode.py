@@ -441,13 +441,16 @@ def test_save_time_count_matches_numpy_searchsorted(n):
 
     rng = np.random.default_rng(n)
     ts = np.sort(rng.uniform(0.0, 2.0, n))
-    for t in np.concatenate([ts, rng.uniform(-0.5, 2.5, 50), [-1.0, 3.0]]):
-        expected = np.searchsorted(ts, t, side="right")
-        got = int(_count_at_or_before(jnp.asarray(ts), jnp.asarray(t)))
-        assert got == expected
-        # From any count already known (the loop's), windowed and binary alike.
-        for start in {0, expected // 2, max(expected - 1, 0), expected}:
-            assert int(count_from(jnp.asarray(ts), jnp.asarray(start), jnp.asarray(t))) == expected
+    times = np.concatenate([ts, rng.uniform(-0.5, 2.5, 50), [-1.0, 3.0]])
+    expected = np.searchsorted(ts, times, side="right")
+    binary = jax.jit(jax.vmap(_count_at_or_before, in_axes=(None, 0)))
+    np.testing.assert_array_equal(np.asarray(binary(jnp.asarray(ts), jnp.asarray(times))), expected)
+    # From any count already known (the loop's), windowed and binary alike.
+    starts = np.stack([np.zeros_like(expected), expected // 2, np.maximum(expected - 1, 0), expected])
+    windowed = jax.jit(jax.vmap(count_from, in_axes=(None, 0, 0)))
+    for start in starts:
+        got = windowed(jnp.asarray(ts), jnp.asarray(start), jnp.asarray(times))
+        np.testing.assert_array_equal(np.asarray(got), expected)
 
 
 def test_save_time_rows_sequential_and_vectorized_agree():
