@@ -234,11 +234,12 @@ def notes(result: dict, out: dict) -> dict:
     notes = {}
     kernels = result["machine"].get("loop_kernel_bytes") is not None
     if fit:
-        step_us, fixed_ms = 1e6 * fit["per_step_s"], 1e3 * result["profile"]["fixed_call_s"]
+        step_us, fixed_ms = 1e6 * fit["per_step_s"], 1e3 * fit["fixed_s"]
         cost = (
-            f"the event mode costs about {fixed_ms:.2f} ms per call (measured over a 1 us span: validation "
-            "and dispatch in Python, the loop's set-up, the outputs at the 2001 save times) plus "
-            f"{step_us:.2f} us per step (fit over its tolerances)"
+            f"the event mode costs about {fixed_ms:.2f} ms per call (the intercept of wall = fixed + "
+            "per-step cost x steps over its tolerances: validation and dispatch in Python, the hand-over "
+            "of a program with more than 8 thunks to XLA:CPU's thread pool, the loop's set-up, the "
+            f"outputs at the 2001 save times) plus {step_us:.2f} us per step"
         )
     else:
         cost = "the event mode's per-step cost dominates"

@@ -767,10 +767,12 @@ def _skip_scenes(size: Size, log) -> list[dict]:
 
 
 def _profile(log) -> dict:
-    """The fixed cost of one event-mode call: the same compiled scene over a 1 µs span.
+    """One event-mode call of the same compiled scene over a 1 µs span, and the loop's size.
 
     Set-up in Python (validation, settings), dispatch, the loop's start and end, and the
-    output evaluation at the 2001 save times; the per-step cost comes from `per_step_fit`.
+    outputs at the 2001 save times, all of them inside one step (each costs ~5x one in a
+    long run, so this is an upper bound of the fixed cost; `per_step_fit`'s intercept is
+    the fixed cost of the real runs).
     """
     import jax
 
@@ -785,7 +787,10 @@ def _profile(log) -> dict:
         jax.block_until_ready(simulate(ball, y0, 1e-6, **kw))
         walls.append(time.perf_counter() - start)
     out = {"fixed_call_s": statistics.median(walls)}
-    log(f"  profile: one event-mode call over 1 us (fixed cost): {1e3 * out['fixed_call_s']:.2f} ms")
+    log(
+        f"  profile: one event-mode call over 1 us (all 2001 save times in one step): "
+        f"{1e3 * out['fixed_call_s']:.2f} ms"
+    )
     out.update(loop_structure(lambda b: simulate(b, y0, T1, **kw), ball))
     log(
         f"  profile: the step loop's body has {out['loop_body_equations']} equations; its conds' branches "
