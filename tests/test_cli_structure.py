@@ -125,6 +125,17 @@ def test_a_value_error_raised_inside_the_traced_solve_is_an_internal_error(monke
     assert code == 1 and "internal error: ValueError: boom" in err, err
 
 
+def test_a_value_error_raised_on_the_host_before_the_solve_is_an_internal_error(monkeypatch, capsys):
+    """A plain `ValueError` from the host side of `simulate` (building the solver settings,
+    before any tracing) is a bug: only the API's `InputError` is bad input."""
+    import jaxunilat._solver._simulate as engine
+
+    monkeypatch.setattr(engine, "make_settings", _boom_value_error)
+    code = main(["simulate", "ball", "--t1", "0.123", "--samples", "7"])
+    err = capsys.readouterr().err
+    assert code == 1 and "internal error: ValueError: boom" in err, err
+
+
 @pytest.mark.parametrize(
     "argv, words",
     [

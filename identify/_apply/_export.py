@@ -59,7 +59,7 @@ import os
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
-from jaxunilat.internal import check_choice, check_range
+from jaxunilat.internal import InputError, check_choice, check_range
 
 MODES = ("direct", "standard")
 MATCHES = ("law", "rebound")
@@ -136,18 +136,18 @@ def _load(fit_or_path) -> tuple[dict, str | None]:
             with open(path, encoding="utf-8") as fh:
                 return json.load(fh), path
         except FileNotFoundError:
-            raise ValueError(
+            raise InputError(
                 f"fit file {path!r} not found; write it with `jaxunilat identify --json`"
             ) from None
         except IsADirectoryError:
-            raise ValueError(f"fit file {path!r} is a directory, not a JSON file") from None
+            raise InputError(f"fit file {path!r} is a directory, not a JSON file") from None
         except (json.JSONDecodeError, UnicodeDecodeError) as err:
-            raise ValueError(f"fit file {path!r} is not valid JSON ({err})") from None
+            raise InputError(f"fit file {path!r} is not valid JSON ({err})") from None
     if hasattr(fit_or_path, "to_json_dict"):
         return fit_or_path.to_json_dict(), None
     if isinstance(fit_or_path, dict):
         return fit_or_path, None
-    raise ValueError(
+    raise InputError(
         f"fit = {type(fit_or_path).__name__} is not supported; pass a path to the fit JSON, "
         "its dict, or a fit result with .to_json_dict()"
     )
@@ -157,11 +157,11 @@ def _number(where: str, value, *, allow_none: bool = False) -> float | None:
     if value is None and allow_none:
         return None
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"fit JSON: {where} = {value!r} is not a number")
+        raise InputError(f"fit JSON: {where} = {value!r} is not a number")
     if not math.isfinite(value):
         if allow_none:
             return None
-        raise ValueError(f"fit JSON: {where} = {value!r} is not finite")
+        raise InputError(f"fit JSON: {where} = {value!r} is not finite")
     return float(value)
 
 
@@ -170,14 +170,14 @@ def _estimate(section: dict, name: str, group: str) -> Estimate | None:
     if entry is None:
         return None
     if not isinstance(entry, dict) or "value" not in entry:
-        raise ValueError(f"fit JSON: {group}.{name} must be an object with a 'value'")
+        raise InputError(f"fit JSON: {group}.{name} must be an object with a 'value'")
     where = f"{group}.{name}"
     value = _number(f"{where}.value", entry["value"])
     stderr = _number(f"{where}.stderr", entry.get("stderr"), allow_none=True)
     ci = entry.get("ci95")
     if ci is not None:
         if not isinstance(ci, (list, tuple)) or len(ci) != 2:
-            raise ValueError(f"fit JSON: {where}.ci95 = {ci!r} must be [low, high] or null")
+            raise InputError(f"fit JSON: {where}.ci95 = {ci!r} must be [low, high] or null")
         lo = _number(f"{where}.ci95[0]", ci[0], allow_none=True)
         hi = _number(f"{where}.ci95[1]", ci[1], allow_none=True)
         ci = None if lo is None or hi is None else (min(lo, hi), max(lo, hi))
@@ -543,10 +543,10 @@ def _read_fit(fit_or_path, mass: float | None) -> _Fit:
     """Load the fit and check κ, k_r, e, t_c and the masses (kg); `mass` overrides the fit's."""
     fit, source = _load(fit_or_path)
     if not isinstance(fit, dict):
-        raise ValueError("fit JSON: the top level must be an object with 'parameters'")
+        raise InputError("fit JSON: the top level must be an object with 'parameters'")
     params = fit.get("parameters")
     if not isinstance(params, dict):
-        raise ValueError("fit JSON: 'parameters' (with 'kappa' and 'k_r') is missing")
+        raise InputError("fit JSON: 'parameters' (with 'kappa' and 'k_r') is missing")
     derived = fit.get("derived") or {}
     kappa = _estimate(params, "kappa", "parameters")
     k_r = _estimate(params, "k_r", "parameters")
@@ -559,18 +559,18 @@ def _read_fit(fit_or_path, mass: float | None) -> _Fit:
         check_range("mass (in the fit JSON)", fit_mass, lo=0.0, lo_open=True, unit="kg")
     if mass is None:
         if fit_mass is None:
-            raise ValueError("the fit JSON has no 'mass'; pass the ball's mass in kg (mass=..., or --mass M)")
+            raise InputError("the fit JSON has no 'mass'; pass the ball's mass in kg (mass=..., or --mass M)")
         mass = fit_mass
     mass = float(mass)
     m_fit = mass if fit_mass is None else fit_mass
 
     kappa_ok = _identifiable(fit, "kappa", kappa) and kappa is not None and kappa.value > 0
     if kappa is not None and kappa.value <= 0:
-        raise ValueError(f"fit JSON: parameters.kappa.value = {kappa.value:g} N/m must be > 0")
+        raise InputError(f"fit JSON: parameters.kappa.value = {kappa.value:g} N/m must be > 0")
     if k_r is not None and k_r.value < 0:
-        raise ValueError(f"fit JSON: parameters.k_r.value = {k_r.value:g} N*s/m must be >= 0")
+        raise InputError(f"fit JSON: parameters.k_r.value = {k_r.value:g} N*s/m must be >= 0")
     if kappa_ok and k_r is None:
-        raise ValueError("fit JSON: parameters.k_r is missing")
+        raise InputError("fit JSON: parameters.k_r is missing")
     return _Fit(fit, source, kappa, k_r, e_fit, tc_fit, fit_mass, mass, m_fit, kappa_ok)
 
 
@@ -583,12 +583,12 @@ def _fit_restitution(fit: _Fit) -> Estimate:
             e_fit = _monotone(zeta, _e_from_zeta, _de_dzeta)
     e_ok = e_fit is not None and 0 < e_fit.value <= 1 and _identifiable(fit.raw, "restitution", e_fit)
     if not fit.kappa_ok and not e_ok:
-        raise ValueError(
+        raise InputError(
             "the fit identifies neither kappa nor the restitution e; there is nothing to export "
             "(fit more informative data: impact times or a position trace)"
         )
     if e_fit is None or not 0 < e_fit.value <= 1:
-        raise ValueError("fit JSON: the restitution e must be in (0, 1]")
+        raise InputError("fit JSON: the restitution e must be in (0, 1]")
     return e_fit
 
 
@@ -600,7 +600,7 @@ def _dampratio_at_mass(e_fit: Estimate, fit: _Fit) -> tuple[Estimate, Estimate]:
     zeta_fit = _monotone(e_fit, lambda e: _zeta_from_e(_clip_e(e)), lambda e: _dzeta_de(_clip_e(e)))
     dampratio = _scale(zeta_fit, math.sqrt(fit.m_fit / fit.mass))
     if dampratio.value >= 1:
-        raise ValueError(
+        raise InputError(
             f"damping ratio zeta = {dampratio.value:.3g} >= 1 at mass {fit.mass:g} kg: the contact is "
             "overdamped (no rebound); MuJoCo's settings would not reproduce a restitution"
         )
@@ -712,7 +712,7 @@ def _law_settings(
 def _rebound_settings(law: _Settings, fit: _Fit, notes: list[str]) -> _Settings:
     """`match="rebound"`: settings whose non-adhesive contact rebounds with the law's e and t_c (s)."""
     if law.contact_time is None:
-        raise ValueError("match='rebound' needs the contact time t_c, which these parameters do not give")
+        raise InputError("match='rebound' needs the contact time t_c, which these parameters do not give")
     stiffness, damping, timeconst, dampratio = _match_rebound(law.restitution, law.contact_time)
     kappa, k_r, mass = fit.kappa, fit.k_r, fit.mass
     notes.append(
@@ -735,7 +735,7 @@ def _solref(mode: str, settings: _Settings) -> tuple[float, float]:
     if mode == "direct":
         return (-settings.stiffness.value, -settings.damping.value)
     if settings.timeconst is None:
-        raise ValueError(
+        raise InputError(
             "k_r = 0: the standard format cannot express an undamped contact (timeconst = 2m/k_r is "
             "infinite); use mode='direct' (--mode direct)"
         )
@@ -747,7 +747,7 @@ def _zeta_for_rebound(e: float) -> float:
     top = 1.0 / math.sqrt(2.0) * (1.0 - 1e-12)
     e_min = nonadhesive_rebound(top)[0]
     if e < e_min:
-        raise ValueError(
+        raise InputError(
             f"e = {e:.4g}: a contact whose force cannot pull (MuJoCo's) gives no restitution below "
             f"{e_min:.4f} with a linear spring-damper; use match='law'"
         )

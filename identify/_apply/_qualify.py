@@ -34,7 +34,7 @@ import os
 
 import numpy as np
 
-from jaxunilat.internal import check_range
+from jaxunilat.internal import InputError, check_range
 
 #: The ITTF ball test: mass (kg), drop height (m), pass window (m), and drag (s/m).
 ITTF_MASS = 2.7e-3
@@ -208,17 +208,17 @@ def _heights(kappas, k_rs, *, mass, gravity, drag, drop, statuses: list | None =
     return out
 
 
-def _no_rebound(kappa, k_r, drop, status: int) -> ValueError:
+def _no_rebound(kappa, k_r, drop, status: int) -> InputError:
     """The error for a test run with no rebound height, naming its real cause."""
     if status != 0:
         import jaxunilat
 
         name = jaxunilat.Status(status).name
-        return ValueError(
+        return InputError(
             f"the simulated drop from drop = {drop:g} m failed ({name}) before the first rebound apex; "
             "a rebound test drops from centimetres to a few metres: check drop (m), mass (kg) and gravity"
         )
-    return ValueError(
+    return InputError(
         f"kappa = {kappa:g} N/m, k_r = {k_r:g} N*s/m: the ball does not rebound (overdamped contact); "
         "no rebound height"
     )
@@ -262,7 +262,7 @@ def _check_test(*, mass, drop, drag, gravity, min_height=0.0, max_height=1.0):
     check_range("min_height", min_height, lo=0.0, unit="m")
     check_range("max_height", max_height, lo=0.0, lo_open=True, unit="m")
     if not min_height < max_height:
-        raise ValueError(
+        raise InputError(
             f"min_height = {min_height:g} m is not below max_height = {max_height:g} m; "
             "the pass window must be [min, max] with min < max"
         )
@@ -321,9 +321,9 @@ def _finish(
 
 def _check_samples(samples, seed):
     if not isinstance(samples, (int, np.integer)) or isinstance(samples, bool) or samples < 20:
-        raise ValueError(f"samples = {samples!r} is out of range; valid range is integers >= 20")
+        raise InputError(f"samples = {samples!r} is out of range; valid range is integers >= 20")
     if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
-        raise ValueError(f"seed = {seed!r} is out of range; valid range is integers >= 0")
+        raise InputError(f"seed = {seed!r} is out of range; valid range is integers >= 0")
 
 
 def qualify(
@@ -374,7 +374,7 @@ def qualify(
     if stderr is None or (stderr[0] == 0 and stderr[1] == 0):
         return _finish(height, None, uncertainty="none (exact parameters)", samples=0, seed=None, **common)
     if len(stderr) != 2:
-        raise ValueError(f"stderr = {stderr!r} must be a pair (s_kappa [N/m], s_k_r [N*s/m])")
+        raise InputError(f"stderr = {stderr!r} must be a pair (s_kappa [N/m], s_k_r [N*s/m])")
     check_range("stderr of kappa", stderr[0], lo=0.0, unit="N/m")
     check_range("stderr of k_r", stderr[1], lo=0.0, unit="N*s/m")
     check_range("correlation", correlation, lo=-1.0, hi=1.0)
@@ -414,13 +414,13 @@ def _number(fit, keys, where, *, required=True, positive=False):
     name = ".".join(keys)
     if node is not None and (isinstance(node, bool) or not isinstance(node, (int, float))):
         # A value of the wrong type is a damaged file, never "absent".
-        raise ValueError(f"{where}: {name} = {node!r} must be a number")
+        raise InputError(f"{where}: {name} = {node!r} must be a number")
     if node is None or not math.isfinite(node):
         if required:
-            raise ValueError(f"{where}: {name} = {node!r} must be a finite number")
+            raise InputError(f"{where}: {name} = {node!r} must be a finite number")
         return None
     if positive and not node > 0:
-        raise ValueError(f"{where}: {name} = {node!r} is out of range; valid range is (0, inf)")
+        raise InputError(f"{where}: {name} = {node!r} is out of range; valid range is (0, inf)")
     return float(node)
 
 
@@ -432,22 +432,22 @@ def load_fit(path) -> dict:
     """
     name = os.fspath(path)
     if os.path.isdir(name):
-        raise ValueError(f"{name}: is a directory, not a fit JSON file")
+        raise InputError(f"{name}: is a directory, not a fit JSON file")
     try:
         with open(name, encoding="utf-8-sig") as f:
             text = f.read()
     except FileNotFoundError:
-        raise ValueError(f"{name}: no such file") from None
+        raise InputError(f"{name}: no such file") from None
     except UnicodeDecodeError:
-        raise ValueError(f"{name}: not UTF-8 text; expected a fit JSON file") from None
+        raise InputError(f"{name}: not UTF-8 text; expected a fit JSON file") from None
     except OSError as err:
-        raise ValueError(f"{name}: cannot be read ({err.strerror or err})") from None
+        raise InputError(f"{name}: cannot be read ({err.strerror or err})") from None
     try:
         fit = json.loads(text)
     except json.JSONDecodeError as err:
-        raise ValueError(f"{name}: line {err.lineno}: not valid JSON ({err.msg})") from None
+        raise InputError(f"{name}: line {err.lineno}: not valid JSON ({err.msg})") from None
     if not isinstance(fit, dict) or not isinstance(fit.get("parameters"), dict):
-        raise ValueError(
+        raise InputError(
             f"{name}: not a fit JSON: expected an object with 'parameters' "
             "(as written by `jaxunilat identify --json`)"
         )
@@ -487,7 +487,7 @@ def qualify_fit(
     limits = (float(min_height), float(max_height))
     law = fit.get("law", "kelvin-voigt")
     if law != "kelvin-voigt":
-        raise ValueError(
+        raise InputError(
             f"{where}: law = {law!r}: the rebound test is simulated with the Kelvin-Voigt law; "
             "refit with --law kelvin-voigt to qualify"
         )
@@ -495,7 +495,7 @@ def qualify_fit(
     if not isinstance(ident, dict) or not all(
         isinstance(ident.get(k), bool) for k in ("kappa", "k_r", "restitution")
     ):
-        raise ValueError(
+        raise InputError(
             f"{where}: identifiable = {ident!r}: expected true/false for kappa, k_r and restitution "
             "(as written by `jaxunilat identify --json`)"
         )
@@ -529,16 +529,16 @@ def qualify_fit(
     e = _number(fit, ("derived", "restitution", "value"), where, required=False)
     s_e = _number(fit, ("derived", "restitution", "stderr"), where, required=False)
     if ident.get("restitution") is not True or e is None or s_e is None:
-        raise ValueError(
+        raise InputError(
             f"{where}: the fit identifies neither kappa and k_r (identifiable.kappa/k_r with finite "
             "stderr) nor the restitution (identifiable.restitution with derived.restitution value and "
             "stderr); nothing to qualify"
         )
     if not 0 < e < 1:
-        raise ValueError(f"{where}: derived.restitution.value = {e!r} is out of range; valid range is (0, 1)")
+        raise InputError(f"{where}: derived.restitution.value = {e!r} is out of range; valid range is (0, 1)")
     check_range(f"{where}: derived.restitution.stderr", s_e, lo=0.0)
     if fit_mass is None:
-        raise ValueError(
+        raise InputError(
             f"{where}: mass is missing; a restitution-only fit needs the mass it was fitted at (kg)"
         )
     lo_tc, hi_tc = CONTACT_TIME_PRIOR
@@ -579,7 +579,7 @@ def _correlation(fit, where) -> float:
     except (TypeError, ValueError):
         c = None
     if c is None or c.ndim != 2 or c.shape[0] != c.shape[1] or c.shape[0] < 2 or not np.all(np.isfinite(c)):
-        raise ValueError(
+        raise InputError(
             f"{where}: correlation = {corr!r} must be a square matrix (at least 2x2, order kappa, k_r, ...) "
             "of finite numbers"
         )
@@ -588,7 +588,7 @@ def _correlation(fit, where) -> float:
         or np.any(np.abs(np.diag(c) - 1) > 1e-6)
         or np.any(np.abs(c) > 1 + 1e-9)
     ):
-        raise ValueError(
+        raise InputError(
             f"{where}: correlation = {corr!r} is not a correlation matrix (symmetric, unit diagonal, |rho| <= 1)"
         )
     return float(np.clip(c[0, 1], -1.0, 1.0))

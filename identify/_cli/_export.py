@@ -58,15 +58,12 @@ def register(commands) -> None:
 
 
 def _run_export_mujoco(args) -> int:
-    from jaxunilat.internal import EXIT_OK, PROG, argument_errors
+    from jaxunilat.internal import EXIT_OK, PROG
 
     from .. import DEFAULT_IMPEDANCE, mujoco_contact
 
     impedance = DEFAULT_IMPEDANCE if args.impedance is None else args.impedance
-    with argument_errors():
-        contact = mujoco_contact(
-            args.fit, mass=args.mass, mode=args.mode, match=args.match, impedance=impedance
-        )
+    contact = mujoco_contact(args.fit, mass=args.mass, mode=args.mode, match=args.match, impedance=impedance)
     print(contact.mjcf())
     for note in contact.notes:
         print(f"{PROG}: warning: {note}", file=sys.stderr)

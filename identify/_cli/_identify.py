@@ -120,28 +120,27 @@ def _checked_arguments(args) -> tuple[tuple[str, ...], tuple[str, ...], list[str
 def _run_identify(args) -> int:
     import json
 
-    from jaxunilat.internal import argument_errors, input_errors, output_errors, write_atomically
+    from jaxunilat.internal import input_errors, output_errors, write_atomically
 
     from .. import fit, load_dataset
 
     nuisance, freeze, paths = _checked_arguments(args)
     with input_errors():
         data = [load_dataset(path) for path in paths]
-    with argument_errors():
-        result = fit(
-            data if len(data) > 1 else data[0],
-            nuisance=nuisance,
-            freeze=freeze,
-            starts=args.starts,
-            seed=args.seed,
-            method=args.method,
-            profile=args.profile,
-            progress=True,
-            law=args.law,
-            keep_outliers=args.keep_outliers,
-            outlier_threshold=args.outlier_threshold,
-            holdout=args.holdout,
-        )
+    result = fit(
+        data if len(data) > 1 else data[0],
+        nuisance=nuisance,
+        freeze=freeze,
+        starts=args.starts,
+        seed=args.seed,
+        method=args.method,
+        profile=args.profile,
+        progress=True,
+        law=args.law,
+        keep_outliers=args.keep_outliers,
+        outlier_threshold=args.outlier_threshold,
+        holdout=args.holdout,
+    )
     print(result.report())
     with output_errors():
         if args.json is not None:

@@ -78,7 +78,7 @@ def _run_qualify(args) -> int:
     import json
     import time
 
-    from jaxunilat.internal import EXIT_OK, RunError, argument_errors, write_atomically
+    from jaxunilat.internal import EXIT_OK, RunError, write_atomically
 
     from .. import qualify, qualify_fit
 
@@ -92,14 +92,13 @@ def _run_qualify(args) -> int:
         seed=args.seed,
     )
     start = time.perf_counter()
-    with argument_errors():
-        if args.fit is not None:
-            result = qualify_fit(args.fit, mass=args.mass, **test)
-            source = args.fit
-        else:
-            mass = {} if args.mass is None else {"mass": args.mass}
-            result = qualify(args.kappa, args.k_r, **mass, **test)
-            source = "--kappa/--k-r"
+    if args.fit is not None:
+        result = qualify_fit(args.fit, mass=args.mass, **test)
+        source = args.fit
+    else:
+        mass = {} if args.mass is None else {"mass": args.mass}
+        result = qualify(args.kappa, args.k_r, **mass, **test)
+        source = "--kappa/--k-r"
     wall = time.perf_counter() - start
     print(f"{'parameters':<12}from {source}")
     print(result.report())

@@ -46,7 +46,7 @@ import re
 
 import numpy as np
 
-from jaxunilat.internal import special_kind, write_atomically
+from jaxunilat.internal import InputError, special_kind, write_atomically
 
 #: The format version this module reads and writes.
 FORMAT_VERSION = 1
@@ -126,7 +126,7 @@ class Dataset:
             if value is not None:
                 arr = np.array(value, dtype=float, copy=True)
                 if arr.ndim != 1:
-                    raise ValueError(f"Dataset: {name} has shape {arr.shape}; expected a 1-D array")
+                    raise InputError(f"Dataset: {name} has shape {arr.shape}; expected a 1-D array")
                 arr.flags.writeable = False
                 object.__setattr__(self, name, arr)
         for name in _NUMERIC_KEYS:
@@ -135,7 +135,7 @@ class Dataset:
                 try:
                     object.__setattr__(self, name, float(value))
                 except (TypeError, ValueError):
-                    raise ValueError(f"Dataset: {name} = {value!r} is not a number") from None
+                    raise InputError(f"Dataset: {name} = {value!r} is not a number") from None
         _validate(self, _Where("Dataset"))
 
     @property
@@ -200,59 +200,59 @@ def _range_text(lo, lo_open):
 def _validate(ds: Dataset, where: _Where) -> None:
     """Check every field of `ds`; raise `ValueError` saying where, what and the valid range."""
     if ds.scene not in SCENES:
-        raise ValueError(f"{where('scene')} = {ds.scene!r} is not supported; choose one of {SCENES}")
+        raise InputError(f"{where('scene')} = {ds.scene!r} is not supported; choose one of {SCENES}")
     if ds.observe not in OBSERVES:
-        raise ValueError(f"{where('observe')} = {ds.observe!r} is not supported; choose one of {OBSERVES}")
+        raise InputError(f"{where('observe')} = {ds.observe!r} is not supported; choose one of {OBSERVES}")
     for name, (unit, lo, lo_open) in _NUMERIC_KEYS.items():
         value = getattr(ds, name)
         if value is None:
             if name in REQUIRED_KEYS or name == "gravity":
-                raise ValueError(f"{where(name)}: missing; it is required ({unit})")
+                raise InputError(f"{where(name)}: missing; it is required ({unit})")
             continue
         if not isinstance(value, float):
-            raise ValueError(f"{where(name)} = {value!r} is not a number ({unit})")
+            raise InputError(f"{where(name)} = {value!r} is not a number ({unit})")
         if not math.isfinite(value):
-            raise ValueError(f"{where(name)} = {value} is not finite; it must be a finite number ({unit})")
+            raise InputError(f"{where(name)} = {value} is not finite; it must be a finite number ({unit})")
         if lo is not None and (value < lo or (lo_open and value == lo)):
-            raise ValueError(
+            raise InputError(
                 f"{where(name)} = {value:g} is out of range; valid range is {_range_text(lo, lo_open)} {unit}"
             )
     if ds.scene == "rackets" and ds.gap is None:
-        raise ValueError(
+        raise InputError(
             f"{where('gap')}: missing; scene = rackets needs gap (m, > 0), the walls being at ±gap/2"
         )
     if ds.scene == "drop" and ds.gap is not None:
-        raise ValueError(
+        raise InputError(
             f"{where('gap')} = {ds.gap:g} is not allowed for scene = drop (one surface at x = 0); "
             "remove it, or use scene = rackets"
         )
     if ds.scene == "drop" and ds.x0 < 0:
-        raise ValueError(
+        raise InputError(
             f"{where('x0')} = {ds.x0:g} is out of range; valid range is [0, inf) m for scene = drop "
             "(x is the height of the ball's lowest point above the surface)"
         )
     if ds.scene == "rackets" and abs(ds.x0) > ds.gap / 2:
-        raise ValueError(
+        raise InputError(
             f"{where('x0')} = {ds.x0:g} is out of range; valid range is [{-ds.gap / 2:g}, {ds.gap / 2:g}] m "
             f"(between the walls at ±gap/2, gap = {ds.gap:g} m)"
         )
     if ds.source is not None and (not isinstance(ds.source, str) or "\n" in ds.source or "\r" in ds.source):
-        raise ValueError(f"{where('source')} = {ds.source!r} must be one line of text")
+        raise InputError(f"{where('source')} = {ds.source!r} must be one line of text")
     required, optional = COLUMNS[ds.observe]
     for name in ("t", "x", "h"):
         value = getattr(ds, name)
         if name in required and value is None:
-            raise ValueError(
+            raise InputError(
                 f"{where(name)}: missing; observe = {ds.observe} needs columns {','.join(required)}"
             )
         if name not in required + optional and value is not None:
-            raise ValueError(
+            raise InputError(
                 f"{where(name)}: not allowed for observe = {ds.observe} "
                 f"(columns: {','.join(required)}" + (f", optional {','.join(optional)})" if optional else ")")
             )
     n = len(getattr(ds, required[0]))
     if n < MIN_ROWS[ds.observe]:
-        raise ValueError(
+        raise InputError(
             f"{where('data')}: {n} data rows; observe = {ds.observe} needs at least {MIN_ROWS[ds.observe]}"
         )
     for name in required + optional:
@@ -260,11 +260,11 @@ def _validate(ds: Dataset, where: _Where) -> None:
         if value is None:
             continue
         if len(value) != n:
-            raise ValueError(f"{where(name)} has {len(value)} values; {required[0]} has {n}")
+            raise InputError(f"{where(name)} has {len(value)} values; {required[0]} has {n}")
         bad = np.flatnonzero(~np.isfinite(value))
         if bad.size:
             i = int(bad[0])
-            raise ValueError(
+            raise InputError(
                 f"{where(name, i)} = {float(value[i])} is not finite; it must be a finite number"
             )
     if ds.t is not None:
@@ -273,12 +273,12 @@ def _validate(ds: Dataset, where: _Where) -> None:
         if bad.size:
             i = int(bad[0]) + 1
             kind = "a duplicate of" if ds.t[i] == ds.t[i - 1] else "before"
-            raise ValueError(
+            raise InputError(
                 f"{where('t', i)} = {float(ds.t[i])!r} is {kind} the previous row's t = {float(ds.t[i - 1])!r}; "
                 "times must be strictly increasing"
             )
         if ds.observe in ("trace", "apex") and ds.t[0] < 0:
-            raise ValueError(
+            raise InputError(
                 f"{where('t', 0)} = {float(ds.t[0])!r} is out of range; valid range is [0, inf) s "
                 "(t = 0 is the release, where x0 and v0 hold)"
             )
@@ -286,7 +286,7 @@ def _validate(ds: Dataset, where: _Where) -> None:
         bad = np.flatnonzero(ds.h <= 0)
         if bad.size:
             i = int(bad[0])
-            raise ValueError(
+            raise InputError(
                 f"{where('h', i)} = {float(ds.h[i])!r} is out of range; valid range is (0, inf) m "
                 "(rebound apex heights above the surface)"
             )
@@ -301,18 +301,18 @@ def read_bytes(path, what: str = "a data file") -> tuple[bytes, str]:
     try:
         name = os.fspath(path)
     except TypeError:
-        raise ValueError(f"path = {path!r} is not a file path") from None
+        raise InputError(f"path = {path!r} is not a file path") from None
     if isinstance(name, bytes):
         name = os.fsdecode(name)
     if os.path.isdir(name):
-        raise ValueError(f"{name}: is a directory, not {what}")
+        raise InputError(f"{name}: is a directory, not {what}")
     try:
         with open(name, "rb") as f:
             return f.read(), name
     except FileNotFoundError:
-        raise ValueError(f"{name}: no such file") from None
+        raise InputError(f"{name}: no such file") from None
     except OSError as err:
-        raise ValueError(f"{name}: cannot be read ({err.strerror or err})") from None
+        raise InputError(f"{name}: cannot be read ({err.strerror or err})") from None
 
 
 def _read_text(path) -> tuple[str, str]:
@@ -322,7 +322,7 @@ def _read_text(path) -> tuple[str, str]:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as err:
         line = raw.count(b"\n", 0, err.start) + 1
-        raise ValueError(
+        raise InputError(
             f"{name}: line {line}: the file is not UTF-8 text (byte 0x{raw[err.start]:02x} at offset "
             f"{err.start}); save it as UTF-8"
         ) from None
@@ -357,8 +357,8 @@ def _number(token: str, where: str, unit: str = "") -> float:
         return float(token)
     suffix = f" ({unit})" if unit else ""
     if _NONFINITE.fullmatch(token):
-        raise ValueError(f"{where} = {token} is not finite; it must be a finite number{suffix}")
-    raise ValueError(f"{where} = {token!r} is not a number{suffix}")
+        raise InputError(f"{where} = {token} is not finite; it must be a finite number{suffix}")
+    raise InputError(f"{where} = {token!r} is not a number{suffix}")
 
 
 def _split_value(key: str, rest: str, where: str) -> str:
@@ -369,7 +369,7 @@ def _split_value(key: str, rest: str, where: str) -> str:
     m = re.match(r"[^\s(]*", rest)
     value, tail = m.group(0), rest[m.end() :]
     if tail and not (tail.startswith("(") or tail.lstrip(" ").startswith("(") or re.match(r" {2,}|\t", tail)):
-        raise ValueError(
+        raise InputError(
             f"{where} = {rest!r}: unexpected text {tail.strip()!r} after the value; the value is one "
             "token in SI units, and an inline comment must start with '(' or follow two or more spaces"
         )
@@ -381,16 +381,16 @@ def _parse(text: str, name: str) -> Dataset:
     if lines[-1] == "":
         lines.pop()
     if not lines:
-        raise ValueError(f"{name}: line 1: the file is empty; expected {_FIRST_LINE!r} as the first line")
+        raise InputError(f"{name}: line 1: the file is empty; expected {_FIRST_LINE!r} as the first line")
     first = lines[0].strip()
     version = re.fullmatch(r"#\s*jaxunilat-data\s*:\s*(\S*)", first)
     if version is None:
-        raise ValueError(
+        raise InputError(
             f"{name}: line 1: expected {_FIRST_LINE!r} as the first line, got {lines[0][:60]!r} "
             f"(is this a jaxunilat data file?{_export_hint(lines[:5])})"
         )
     if version.group(1) != str(FORMAT_VERSION):
-        raise ValueError(
+        raise InputError(
             f"{name}: line 1: jaxunilat-data = {version.group(1)!r} is not supported; "
             f"this version reads format {FORMAT_VERSION}"
         )
@@ -405,9 +405,9 @@ def _parse(text: str, name: str) -> Dataset:
         body = body[1:].strip()
         m = re.match(r"([^=\s:]+)\s*([=:])(.*)", body)
         if m is not None and m.group(1) == "jaxunilat-data":
-            raise ValueError(f"{name}: line {number}: jaxunilat-data: duplicate key (first given on line 1)")
+            raise InputError(f"{name}: line {number}: jaxunilat-data: duplicate key (first given on line 1)")
         if m is None or m.group(2) == ":" or not _KEY.fullmatch(m.group(1)):
-            raise ValueError(
+            raise InputError(
                 f"{name}: line {number}: expected a metadata line '# key = value', got {lines[number - 1]!r} "
                 "(free comments start with '##')"
             )
@@ -415,20 +415,20 @@ def _parse(text: str, name: str) -> Dataset:
         if key not in KEYS:
             close = [k for k in KEYS if k.lower() == key.lower()]
             hint = f" (keys are case-sensitive: did you mean {close[0]!r}?)" if close else ""
-            raise ValueError(
+            raise InputError(
                 f"{name}: line {number}: {key}: unknown key{hint}; allowed keys are jaxunilat-data, "
                 + ", ".join(KEYS)
             )
         if key in meta:
-            raise ValueError(f"{name}: line {number}: {key}: duplicate key (first given on line {at[key]})")
+            raise InputError(f"{name}: line {number}: {key}: duplicate key (first given on line {at[key]})")
         value = _split_value(key, m.group(3), f"{name}: line {number}: {key}")
         if not value:
-            raise ValueError(f"{name}: line {number}: {key}: no value after '='")
+            raise InputError(f"{name}: line {number}: {key}: no value after '='")
         meta[key], at[key] = value, number
     header_line = i + 1
     for key in REQUIRED_KEYS:
         if key not in meta:
-            raise ValueError(
+            raise InputError(
                 f"{name}: line {header_line}: {key}: missing key (required keys: {', '.join(REQUIRED_KEYS)}, "
                 "plus gap for scene = rackets); metadata lines come before the column header"
             )
@@ -437,7 +437,7 @@ def _parse(text: str, name: str) -> Dataset:
     for key in ("scene", "observe"):
         choices = SCENES if key == "scene" else OBSERVES
         if fields[key] not in choices:
-            raise ValueError(f"{where(key)} = {fields[key]!r} is not supported; choose one of {choices}")
+            raise InputError(f"{where(key)} = {fields[key]!r} is not supported; choose one of {choices}")
     for key, (unit, _, _) in _NUMERIC_KEYS.items():
         if key in meta:
             fields[key] = _number(meta[key], where(key), unit)
@@ -445,7 +445,7 @@ def _parse(text: str, name: str) -> Dataset:
 
     # The column header and the rows.
     if i >= len(lines):
-        raise ValueError(
+        raise InputError(
             f"{name}: line {header_line}: no column header and no data after the metadata; "
             f"observe = {fields['observe']} needs columns {','.join(COLUMNS[fields['observe']][0])}"
         )
@@ -453,20 +453,20 @@ def _parse(text: str, name: str) -> Dataset:
     expected = ",".join(required) + (f" (optionally also {','.join(optional)})" if optional else "")
     columns = [c.strip() for c in lines[i].split(",")]
     if all(_NUMBER.fullmatch(c) for c in columns):
-        raise ValueError(
+        raise InputError(
             f"{name}: line {header_line}: expected the column header {expected}, got numbers {lines[i][:60]!r}"
         )
     for c in columns:
         if columns.count(c) > 1:
-            raise ValueError(f"{name}: line {header_line}: column {c!r} appears twice; expected {expected}")
+            raise InputError(f"{name}: line {header_line}: column {c!r} appears twice; expected {expected}")
         if c not in required + optional:
-            raise ValueError(
+            raise InputError(
                 f"{name}: line {header_line}: column {c!r} is not allowed for observe = {fields['observe']}; "
                 f"expected {expected}"
             )
     for c in required:
         if c not in columns:
-            raise ValueError(
+            raise InputError(
                 f"{name}: line {header_line}: column {c!r} is missing for observe = {fields['observe']}; "
                 f"expected {expected}"
             )
@@ -477,20 +477,20 @@ def _parse(text: str, name: str) -> Dataset:
         if not line.strip():
             continue
         if line.lstrip().startswith("#"):
-            raise ValueError(
+            raise InputError(
                 f"{name}: line {j + 1}: a '#' line after the column header; metadata and comments "
                 "must come before it"
             )
         cells = [c.strip() for c in line.split(",")]
         if len(cells) != len(columns):
-            raise ValueError(
+            raise InputError(
                 f"{name}: line {j + 1}: {len(cells)} fields, expected {len(columns)} ({','.join(columns)})"
             )
         for k, (c, cell) in enumerate(zip(columns, cells, strict=True)):
             values[k].append(_number(cell, f"{name}: line {j + 1}: {c}"))
         rows.append(j + 1)
     if not rows:
-        raise ValueError(f"{name}: line {header_line}: no data rows after the column header")
+        raise InputError(f"{name}: line {header_line}: no data rows after the column header")
     for c, v in zip(columns, values, strict=True):
         fields[c] = np.asarray(v, dtype=float)
     where = _Where(name, at, rows=rows, end=header_line)
@@ -536,7 +536,7 @@ def _format_number(value: float) -> str:
 def format_dataset(dataset: Dataset) -> str:
     """The file text of `dataset` (what `write_dataset` writes)."""
     if not isinstance(dataset, Dataset):
-        raise ValueError(f"dataset = {type(dataset).__name__} is not an identify.Dataset")
+        raise InputError(f"dataset = {type(dataset).__name__} is not an identify.Dataset")
     out = [_FIRST_LINE]
     for key in KEYS:
         value = getattr(dataset, key)
@@ -567,16 +567,16 @@ def write_dataset(path, dataset: Dataset, *, overwrite: bool = False) -> None:
     _parse(text, os.fspath(path))  # the written text must read back
     name = os.fspath(path)
     if os.path.isdir(name):
-        raise ValueError(f"{name}: is a directory; give a file name")
+        raise InputError(f"{name}: is a directory; give a file name")
     parent = os.path.dirname(os.path.abspath(name))
     if not os.path.isdir(parent):
-        raise ValueError(f"{name}: the directory {parent!r} does not exist")
+        raise InputError(f"{name}: the directory {parent!r} does not exist")
     streamed = special_kind(name) is not None  # a device or FIFO: written through, never replaced
     if os.path.exists(name) and not overwrite and not streamed:
-        raise ValueError(f"{name}: the file exists; pass overwrite=True to replace it")
+        raise InputError(f"{name}: the file exists; pass overwrite=True to replace it")
     if dataset.path is not None and os.path.exists(name) and os.path.exists(dataset.path):
         if os.path.samefile(name, dataset.path):
-            raise ValueError(f"{name}: is the file this dataset was read from; refusing to overwrite it")
+            raise InputError(f"{name}: is the file this dataset was read from; refusing to overwrite it")
     write_text(name, text, overwrite=overwrite)
 
 
@@ -587,4 +587,4 @@ def write_text(name: str, text: str, *, overwrite: bool) -> None:
         with write_atomically(name, replace=overwrite, encoding="utf-8", newline="\n") as f:
             f.write(text)
     except FileExistsError:
-        raise ValueError(f"{name}: the file exists; pass overwrite=True to replace it") from None
+        raise InputError(f"{name}: the file exists; pass overwrite=True to replace it") from None

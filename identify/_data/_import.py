@@ -15,6 +15,8 @@ import os
 
 import numpy as np
 
+from jaxunilat.internal import InputError
+
 from ._format import DEFAULT_GRAVITY, Dataset, _parse, format_dataset, write_text
 
 #: An ITTF 40 mm table-tennis ball, kg.
@@ -179,7 +181,7 @@ def impacts_dataset(
     times = np.asarray(times, dtype=float)
     notes = []
     if len(times) < 2:
-        raise ValueError(
+        raise InputError(
             f"{source}: {len(times)} impact onset(s) kept; a data set of impacts needs at least 2"
         )
     if x0 is None:

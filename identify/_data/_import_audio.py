@@ -37,6 +37,8 @@ import struct
 
 import numpy as np
 
+from jaxunilat.internal import InputError
+
 from ._format import read_bytes
 from ._import import (
     MAX_SPAN,
@@ -103,11 +105,11 @@ def read_wav(path) -> WavAudio:
         kinds = {b"ID3": "an MP3", b"fLa": "a FLAC", b"Ogg": "an Ogg"}
         kind = "an M4A/MP4" if raw[4:8] == b"ftyp" else kinds.get(raw[:3])
         hint = f" ({kind} file? convert it to WAV)" if kind else ""
-        raise ValueError(f"{name}: not a WAV file (no RIFF/WAVE header){hint}")
+        raise InputError(f"{name}: not a WAV file (no RIFF/WAVE header){hint}")
     if raw[:4] == b"RIFX":
-        raise ValueError(f"{name}: big-endian WAV (RIFX) is not supported; {_VALID}, little-endian RIFF")
+        raise InputError(f"{name}: big-endian WAV (RIFX) is not supported; {_VALID}, little-endian RIFF")
     if raw[:4] == b"RF64":
-        raise ValueError(f"{name}: RF64 (WAV over 4 GB) is not supported; export a plain RIFF WAV")
+        raise InputError(f"{name}: RF64 (WAV over 4 GB) is not supported; export a plain RIFF WAV")
     fmt, data = None, None
     pos = 12
     while pos + 8 <= len(raw):
@@ -121,15 +123,15 @@ def read_wav(path) -> WavAudio:
                 break
         pos += 8 + size + (size & 1)
     if fmt is None:
-        raise ValueError(f"{name}: no 'fmt ' chunk before the data; the WAV file is damaged")
+        raise InputError(f"{name}: no 'fmt ' chunk before the data; the WAV file is damaged")
     if data is None:
-        raise ValueError(f"{name}: no 'data' chunk; the WAV file has no samples")
+        raise InputError(f"{name}: no 'data' chunk; the WAV file has no samples")
     if len(fmt) < 16:
-        raise ValueError(f"{name}: the 'fmt ' chunk has {len(fmt)} bytes, expected at least 16; damaged file")
+        raise InputError(f"{name}: the 'fmt ' chunk has {len(fmt)} bytes, expected at least 16; damaged file")
     tag, channels, rate, _, align, bits = struct.unpack("<HHIIHH", fmt[:16])
     if tag == _EXTENSIBLE:
         if len(fmt) < 40:
-            raise ValueError(f"{name}: WAVE_FORMAT_EXTENSIBLE 'fmt ' chunk too short ({len(fmt)} bytes)")
+            raise InputError(f"{name}: WAVE_FORMAT_EXTENSIBLE 'fmt ' chunk too short ({len(fmt)} bytes)")
         valid_bits = struct.unpack("<H", fmt[18:20])[0]
         tag = struct.unpack("<H", fmt[24:26])[0]  # the sub-format GUID starts with the format tag
         if valid_bits and valid_bits != bits and tag == _PCM:
@@ -140,31 +142,31 @@ def read_wav(path) -> WavAudio:
         bits_note = ""
     if tag not in (_PCM, _FLOAT):
         what = _FORMAT_NAMES.get(tag, "an unknown encoding")
-        raise ValueError(f"{name}: WAVE format tag 0x{tag:04x} ({what}) is not supported; {_VALID}")
+        raise InputError(f"{name}: WAVE format tag 0x{tag:04x} ({what}) is not supported; {_VALID}")
     encoding = "pcm" if tag == _PCM else "float"
     if (encoding == "pcm" and bits not in (16, 24, 32)) or (encoding == "float" and bits not in (32, 64)):
-        raise ValueError(f"{name}: {bits}-bit {encoding.upper()}{bits_note} is not supported; {_VALID}")
+        raise InputError(f"{name}: {bits}-bit {encoding.upper()}{bits_note} is not supported; {_VALID}")
     if channels not in (1, 2):
-        raise ValueError(f"{name}: {channels} channels; valid: 1 (mono) or 2 (stereo)")
+        raise InputError(f"{name}: {channels} channels; valid: 1 (mono) or 2 (stereo)")
     if not RATE_RANGE[0] <= rate <= RATE_RANGE[1]:
-        raise ValueError(
+        raise InputError(
             f"{name}: sample rate = {rate} Hz is out of range; valid range is "
             f"[{RATE_RANGE[0]}, {RATE_RANGE[1]}] Hz"
         )
     width = bits // 8
     if align != width * channels:
-        raise ValueError(
+        raise InputError(
             f"{name}: block align = {align} bytes does not match {channels} channel(s) of {bits} bits; damaged file"
         )
     frames = len(data) // align
     if frames == 0:
-        raise ValueError(f"{name}: the 'data' chunk holds no samples")
+        raise InputError(f"{name}: the 'data' chunk holds no samples")
     buf = data[: frames * align]
     if encoding == "float":
         x = np.frombuffer(buf, dtype="<f4" if bits == 32 else "<f8").astype(np.float64)
         if not np.all(np.isfinite(x)):
             i = int(np.flatnonzero(~np.isfinite(x))[0]) // channels
-            raise ValueError(f"{name}: sample {i} is not finite (NaN or inf); damaged float WAV")
+            raise InputError(f"{name}: sample {i} is not finite (NaN or inf); damaged float WAV")
     elif bits == 24:
         b = np.frombuffer(buf, dtype=np.uint8).reshape(-1, 3).astype(np.int32)
         v = b[:, 0] | (b[:, 1] << 8) | (b[:, 2] << 16)
@@ -502,7 +504,7 @@ def detect_onsets(
     check_range("noise_level", s["noise_level"], lo=0.0, hi=s["threshold"], lo_open=True)
     x = np.asarray(samples, dtype=np.float64)
     if x.ndim != 1 or len(x) < 16:
-        raise ValueError(f"samples has shape {x.shape}; expected a 1-D array of at least 16 samples")
+        raise InputError(f"samples has shape {x.shape}; expected a 1-D array of at least 16 samples")
     env = envelope(x, rate)
     silent = digital_silence(x, rate)
     sigma = noise_floor(env, rate, silent)
@@ -844,7 +846,7 @@ def import_wav(
     name = os.fspath(path)
     s = det.settings
     if len(onsets) < 2:
-        raise ValueError(
+        raise InputError(
             f"{name}: {len(det.onset)} click(s) detected, {len(onsets)} kept; need at least 2 impacts "
             f"(noise floor {det.noise_floor:.3g} of full scale; try a lower --threshold than {s['threshold']:g})"
         )

@@ -19,6 +19,8 @@ import re
 
 import numpy as np
 
+from jaxunilat.internal import InputError
+
 from ._format import DEFAULT_GRAVITY, read_bytes
 from ._import import (
     ImportResult,
@@ -98,7 +100,7 @@ def _decode(raw: bytes, name: str) -> str:
     if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
         return raw.decode("utf-16")
     if b"\0" in raw[:4096]:
-        raise ValueError(f"{name}: line 1: a binary file, not a text table (a WAV? an .xlsx renamed?)")
+        raise InputError(f"{name}: line 1: a binary file, not a text table (a WAV? an .xlsx renamed?)")
     try:
         return raw.decode("utf-8").removeprefix("\ufeff")
     except UnicodeDecodeError:
@@ -113,7 +115,7 @@ def read_table(path) -> Table:
     text = _decode(raw, name)
     lines = [(i + 1, line) for i, line in enumerate(re.split(r"\r\n|\r|\n", text)) if line.strip()]
     if not lines:
-        raise ValueError(f"{name}: line 1: the file is empty (no header, no data rows)")
+        raise InputError(f"{name}: line 1: the file is empty (no header, no data rows)")
     sep = _detect_separator([line for _, line in lines[:50]])
     split = [(n, _split(line, sep)) for n, line in lines]
     decimal = _detect_decimal(split, sep)
@@ -176,7 +178,7 @@ def _check_magnitudes(name, unit, n, cells, values, columns) -> None:
         if isinstance(v, float) and not abs(v) <= MAX_MAGNITUDE:
             text = str(cells[k]).strip().strip('"').strip()
             why = "beyond float64, it reads as infinity" if math.isinf(v) else "an absurd magnitude"
-            raise ValueError(
+            raise InputError(
                 f"{name}: {unit} {n}: column {columns[k].header!r}: {text!r} is out of range ({why}); "
                 f"valid range is [-{MAX_MAGNITUDE:g}, {MAX_MAGNITUDE:g}] in the column's unit"
             )
@@ -190,9 +192,9 @@ def _is_data(cells, decimal) -> bool:
 def _build(name, unit, split, *, sep=None, decimal=".", kind="CSV") -> Table:
     first = next((i for i, (_, cells) in enumerate(split) if _is_data(cells, decimal)), None)
     if first is None:
-        raise ValueError(_no_data_problem(name, unit, split, sep))
+        raise InputError(_no_data_problem(name, unit, split, sep))
     if first == 0:
-        raise ValueError(
+        raise InputError(
             f"{name}: {unit} {split[0][0]}: no header row before the numbers; the first row must name the "
             "columns, with units, e.g. 't (s)', 'y (cm)' or \"Event time (s)\""
         )
@@ -207,7 +209,7 @@ def _build(name, unit, split, *, sep=None, decimal=".", kind="CSV") -> Table:
         # Decimal commas in a comma-separated file: the numbers split in two. Name the first
         # row that reads as whole numbers only (it may even have the right field count).
         n, cells = next((n, c) for n, c in data if _split_decimals(c, 0))
-        raise ValueError(
+        raise InputError(
             f"{name}: {unit} {n}: {sep.join(str(c) for c in cells)!r}: decimal commas in a comma-separated "
             "file (the numbers split in two); export with a semicolon or tab separator, or with decimal points"
         )
@@ -232,7 +234,7 @@ def _build(name, unit, split, *, sep=None, decimal=".", kind="CSV") -> Table:
                 if any(c is not None and str(c).strip() for c in cs)
             ]
             break
-        raise ValueError(
+        raise InputError(
             _row_problem(
                 name,
                 unit,
@@ -246,7 +248,7 @@ def _build(name, unit, split, *, sep=None, decimal=".", kind="CSV") -> Table:
             )
         )
     if not rows:
-        raise ValueError(f"{name}: {unit} {header_line}: no numeric data rows after the header")
+        raise InputError(f"{name}: {unit} {header_line}: no numeric data rows after the header")
     return Table(
         name, unit, header_line, columns, rows, preamble, trailing, sep=sep, decimal=decimal, kind=kind
     )
@@ -316,14 +318,14 @@ def _read_xlsx(name: str) -> Table:
     try:
         import openpyxl
     except ImportError:
-        raise ValueError(
+        raise InputError(
             f"{name}: an .xlsx workbook; reading it needs openpyxl (pip install 'jaxunilat[xlsx]'), "
             "or export CSV from the app"
         ) from None
     try:
         book = openpyxl.load_workbook(name, read_only=True, data_only=True)
     except Exception as err:  # a damaged or non-workbook zip
-        raise ValueError(f"{name}: not a readable .xlsx workbook ({type(err).__name__}: {err})") from None
+        raise InputError(f"{name}: not a readable .xlsx workbook ({type(err).__name__}: {err})") from None
     problems, tables = [], []
     try:
         for sheet in book.worksheets:
@@ -347,7 +349,7 @@ def _read_xlsx(name: str) -> Table:
         book.close()
     if tables:  # the sheet with the most numbers (phyphox writes one sheet per export set)
         return max(tables, key=lambda t: sum(v is not None for _, row in t.rows for v in row))
-    raise ValueError(problems[0] if problems else f"{name}: row 1: the workbook has no data")
+    raise InputError(problems[0] if problems else f"{name}: row 1: the workbook has no data")
 
 
 # -- shared by the phyphox and video importers -------------------------------------------
@@ -359,7 +361,7 @@ def _seconds(table: Table, col: Column, notes: list[str]) -> float:
         return 1.0
     scale = _TIME_UNITS.get(col.unit.lower().rstrip("."))
     if scale is None:
-        raise ValueError(
+        raise InputError(
             f"{table.at(table.header_line)}: column {col.header!r}: unit {col.unit!r} is not a time unit; "
             f"valid: {', '.join(_TIME_UNITS)}"
         )
@@ -532,7 +534,7 @@ def _phyphox_events(
         return _timed_events(table, time_i, interval_i, notes, warnings, rejected)
     if interval_i is not None:
         return _cumulated_events(table, interval_i, notes, rejected)
-    raise ValueError(
+    raise InputError(
         f"{table.at(table.header_line)}: no event-time or interval column among "
         f'{", ".join(repr(c.header) for c in cols)}; expected e.g. "Event time (s)" or "Interval (s)"'
     )
@@ -969,7 +971,7 @@ def import_video(
     if x0 is None:
         x0 = float(x_a[0])
         if x0 < 0:
-            raise ValueError(
+            raise InputError(
                 f"{table.at(lines[0])}: the first height {x0:g} m is below the floor; heights must be measured "
                 "up from the floor (put the tracking origin on it), or pass --x0"
             )
@@ -1004,7 +1006,7 @@ def _video_columns(table: Table, column: str | None, notes: list[str]) -> tuple[
     """The indices of the time column and of the height column (`column`, else `y`, else the other one)."""
     cols = table.columns
     if len(cols) < 2:
-        raise ValueError(
+        raise InputError(
             f"{table.at(table.header_line)}: one column ({cols[0].header!r}); a video table needs a time "
             "column and a height column (wrong separator?)"
         )
@@ -1018,7 +1020,7 @@ def _video_columns(table: Table, column: str | None, notes: list[str]) -> tuple[
             None,
         )
         if height_i is None:
-            raise ValueError(
+            raise InputError(
                 f"{table.at(table.header_line)}: --column {column!r} is not a column; columns: "
                 + ", ".join(repr(c.header) for c in cols)
             )
@@ -1027,7 +1029,7 @@ def _video_columns(table: Table, column: str | None, notes: list[str]) -> tuple[
         if height_i is None:
             height_i = 1 if time_i == 0 else 0
     if height_i == time_i:
-        raise ValueError(
+        raise InputError(
             f"{table.at(table.header_line)}: the height column {cols[height_i].header!r} is the time column"
         )
     return time_i, height_i
@@ -1040,13 +1042,13 @@ def _height_scale(table: Table, hcol: Column, scale: float | None, notes: list[s
             notes.append(f"--scale {scale:g} m per unit overrides the header unit {hcol.unit!r}")
         return scale
     if hcol.unit is None:
-        raise ValueError(
+        raise InputError(
             f"{table.at(table.header_line)}: column {hcol.header!r} has no unit; write it in the header, "
             "e.g. 'y (cm)', or pass --scale (metres per unit)"
         )
     hscale = _LENGTH_UNITS.get(hcol.unit.lower())
     if hscale is None:
-        raise ValueError(
+        raise InputError(
             f"{table.at(table.header_line)}: column {hcol.header!r}: unit {hcol.unit!r} is not a length "
             f"unit this reader knows ({', '.join(_LENGTH_UNITS)}); pass --scale (metres per unit)"
         )
@@ -1068,7 +1070,7 @@ def _video_rows(
             )
             continue
         if t and tv * tscale <= t[-1]:
-            raise ValueError(
+            raise InputError(
                 f"{table.at(line)}: {tcol.header} = {tv:g} is not after the previous row's {t[-1] / tscale:g} "
                 f"({table.unit} {lines[-1]}); times must increase (non-increasing times: rows out of order or "
                 "a duplicated frame?)"
@@ -1077,5 +1079,5 @@ def _video_rows(
         x.append(hv * hscale)
         lines.append(line)
     if len(t) < 3:
-        raise ValueError(f"{table.at(table.header_line)}: {len(t)} usable rows; a trace needs at least 3")
+        raise InputError(f"{table.at(table.header_line)}: {len(t)} usable rows; a trace needs at least 3")
     return np.asarray(t), np.asarray(x), lines

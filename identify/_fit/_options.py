@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 import optax
 
-from jaxunilat.internal import check_choice, check_range
+from jaxunilat.internal import InputError, check_choice, check_range
 
 from ._problem import LOG_PARAMETERS, NUISANCE, PARAMETERS
 from ._robust import fitted_count
@@ -32,7 +32,7 @@ def _load(data):
         return data
     if isinstance(data, (str, bytes)) or hasattr(data, "__fspath__"):
         return load_dataset(data)
-    raise ValueError(f"data = {data!r} is not an identify.Dataset or a path to a data file")
+    raise InputError(f"data = {data!r} is not an identify.Dataset or a path to a data file")
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -63,7 +63,7 @@ class Options:
 def load_all(data) -> list:
     if isinstance(data, (list, tuple)):
         if not data:
-            raise ValueError("data = [] names no data set; give at least one data file")
+            raise InputError("data = [] names no data set; give at least one data file")
         return [_load(d) for d in data]
     return [_load(data)]
 
@@ -79,7 +79,7 @@ def refuse_duplicates(datasets) -> None:
         key = (d.observe, *columns)
         if key in seen:
             g = seen[key]
-            raise ValueError(
+            raise InputError(
                 f"data = files {g + 1} and {f + 1} ({datasets[g].path or 'in memory'}, {d.path or 'in memory'}) "
                 f"hold identical {d.observe} rows ({d.num_rows} rows): the same data given twice would "
                 "count every row twice and shrink the intervals by sqrt(2); valid: each data set once"
@@ -113,7 +113,7 @@ def shift_offset_arguments(initial, bounds, clocks):
     if not any(clocks) or not ({"offset"} & (set(initial or {}) | set(bounds or {}))):
         return initial, bounds
     if len(set(clocks)) > 1:
-        raise ValueError(
+        raise InputError(
             "initial/bounds for 'offset' with several files on different absolute clocks: one offset value "
             "cannot be given for all of them; valid: leave the offset's initial value and bounds out"
         )
@@ -194,13 +194,13 @@ def check_arguments(
         ("max_iterations", max_iterations, 1),
     ):
         if not isinstance(value, int) or isinstance(value, bool) or value < lo:
-            raise ValueError(f"{name} = {value!r} is out of range; valid range is integers >= {lo}")
+            raise InputError(f"{name} = {value!r} is out of range; valid range is integers >= {lo}")
     check_range("tol", tol, lo=1e-14, hi=1e-4, unit="")
     check_range("rel_halfwidth", rel_halfwidth, lo=0.0, lo_open=True, unit="")
     check_range("outlier_threshold", outlier_threshold, lo=1.0, unit="robust sd")
     _check_holdout(datasets, holdout)
     if optimizer is not None and not isinstance(optimizer, optax.GradientTransformation):
-        raise ValueError(f"optimizer = {optimizer!r} is not an optax.GradientTransformation")
+        raise InputError(f"optimizer = {optimizer!r} is not an optax.GradientTransformation")
     return Options(
         nuisance=nuisance,
         freeze=freeze,
@@ -229,12 +229,12 @@ def _check_names(datasets, nuisance: tuple, freeze: tuple) -> None:
     if "offset" in nuisance:
         for d in datasets:
             if d.observe == "apex":
-                raise ValueError(
+                raise InputError(
                     "nuisance 'offset' (a time offset, s) applies to impact onsets and traces; "
                     f"{d.path or 'a data set'} has observe = 'apex'"
                 )
     if set(freeze) >= {"kappa", "k_r"}:
-        raise ValueError("freeze = ('kappa', 'k_r') leaves nothing to fit; free at least one of them")
+        raise InputError("freeze = ('kappa', 'k_r') leaves nothing to fit; free at least one of them")
 
 
 def _check_holdout(datasets, holdout: float) -> None:
@@ -244,7 +244,7 @@ def _check_holdout(datasets, holdout: float) -> None:
         for d in datasets:
             keep = fitted_count(d.num_rows, holdout)
             if keep < MIN_FITTED[d.observe] or keep == d.num_rows:
-                raise ValueError(
+                raise InputError(
                     f"holdout = {holdout!r} leaves {keep} of {d.num_rows} rows of {d.path or 'a data set'} to fit "
                     f"and {d.num_rows - keep} to predict; valid: at least {MIN_FITTED[d.observe]} to fit and 1 to predict"
                 )
@@ -263,7 +263,7 @@ def check_start(initial, bounds):
     for name, pair in bounds.items():
         check_choice("bounds", name, PARAMETERS)
         if len(pair) != 2 or not pair[0] < pair[1]:
-            raise ValueError(f"bounds[{name!r}] = {pair!r} must be a pair (lo, hi) with lo < hi")
+            raise InputError(f"bounds[{name!r}] = {pair!r} must be a pair (lo, hi) with lo < hi")
         if name in LOG_PARAMETERS and pair[0] <= 0:
-            raise ValueError(f"bounds[{name!r}] = {pair!r}: {name} is positive; valid lower bounds are > 0")
+            raise InputError(f"bounds[{name!r}] = {pair!r}: {name} is positive; valid lower bounds are > 0")
     return initial, bounds

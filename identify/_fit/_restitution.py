@@ -40,7 +40,7 @@ import numpy as np
 
 import jaxunilat
 from jaxunilat import Status
-from jaxunilat.internal import check_choice, check_finite, check_range
+from jaxunilat.internal import InputError, check_choice, check_finite, check_range
 
 # -- per-bounce restitution from onset times ------------------------------------------------
 
@@ -169,7 +169,7 @@ def bounce_restitution(
     """
     t = np.asarray(onsets, dtype=float)
     if t.ndim != 1:
-        raise ValueError(f"onsets has shape {t.shape}; expected a 1-D array of onset times in s")
+        raise InputError(f"onsets has shape {t.shape}; expected a 1-D array of onset times in s")
     check_finite("onsets", t)
     check_range("drag", drag, lo=0.0, unit="s/m")
     check_range("gravity", gravity, lo=0.0, lo_open=True, unit="m/s^2")
@@ -177,20 +177,20 @@ def bounce_restitution(
     check_range("drop_height", drop_height, lo=0.0, lo_open=True, unit="m", allow_none=True)
     need = 2 if drop_height is not None else 3
     if len(t) < need:
-        raise ValueError(
+        raise InputError(
             f"onsets has {len(t)} times; valid: at least {need} "
             f"({'with' if drop_height is not None else 'without'} drop_height)"
         )
     gaps = np.diff(t)
     if np.any(gaps <= 0):
         i = int(np.argmax(gaps <= 0))
-        raise ValueError(
+        raise InputError(
             f"onsets[{i + 1}] = {t[i + 1]:g} s is out of range; valid range is onsets strictly increasing "
             f"(> onsets[{i}] = {t[i]:g} s)"
         )
     drag, gravity, contact_time = float(drag), float(gravity), float(contact_time)
     if not contact_time < gaps.min():
-        raise ValueError(
+        raise InputError(
             f"contact_time = {contact_time:g} s is out of range; valid range is [0, {gaps.min():g}) s "
             "(below the shortest interval between onsets)"
         )
@@ -306,10 +306,10 @@ def _check_law_inputs(law, kappa, k_r, mass, speeds, gravity, rtol):
     check_range("rtol", rtol, lo=1e-14, hi=1e-3)
     v = np.asarray(speeds, dtype=float)
     if v.size == 0:
-        raise ValueError("speeds is empty; pass at least one impact speed in m/s")
+        raise InputError("speeds is empty; pass at least one impact speed in m/s")
     check_range("speeds", v, lo=0.0, lo_open=True, unit="m/s")
     if np.ndim(kappa) or np.ndim(k_r) or np.ndim(mass) or np.ndim(gravity):
-        raise ValueError("kappa, k_r, mass and gravity must be scalars; speeds carries the batch")
+        raise InputError("kappa, k_r, mass and gravity must be scalars; speeds carries the batch")
     return v
 
 
@@ -422,7 +422,7 @@ def hunt_crossley_from_restitution(
     check_range("speed", speed, lo=0.0, lo_open=True, unit="m/s")
     check_range("gravity", gravity, lo=0.0, unit="m/s^2")
     if not isinstance(refine, (int, np.integer)) or refine < 0:
-        raise ValueError(f"refine = {refine!r} is out of range; valid range is integers >= 0")
+        raise InputError(f"refine = {refine!r} is out of range; valid range is integers >= 0")
     e, t_c, mass, v = float(e), float(t_c), float(mass), float(speed)
     chi = 1.5 * (1.0 - e) / v
     dmax = v * t_c / _HERTZ

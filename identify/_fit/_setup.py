@@ -15,6 +15,8 @@ import math
 
 import numpy as np
 
+from jaxunilat.internal import InputError
+
 from ._initial import CONTACT_TIME_GUESS, CONTACT_TIME_PRIOR, first_impact_time, initial_restitution
 from ._joint import JointEvaluator, Layout, make_groups
 from ._kelvin_voigt import parameters_from_restitution
@@ -82,7 +84,7 @@ def _noise(datasets) -> tuple[bool, np.ndarray]:
     if all(s is not None for s in stated):
         return True, np.asarray(stated, dtype=float)
     if len({d.observe for d in datasets}) > 1:
-        raise ValueError(
+        raise InputError(
             "a joint fit of different observation types needs the noise of every file (the residual "
             f"scale cannot be shared between metres and seconds); missing in: {_missing_noise(datasets)}"
         )

@@ -27,6 +27,8 @@ import math
 
 import numpy as np
 
+from jaxunilat.internal import InputError
+
 from .._data._import import ratio_chain
 from ._derived import derived_quantities
 from ._gradient import gradient_step, run_gradient_stage
@@ -257,7 +259,7 @@ def check_counts(setup, rows) -> None:
         names = ", ".join(
             "/".join(str(x) for x in setup.layout.names()[j] if x is not None) for j in setup.free
         )
-        raise ValueError(
+        raise InputError(
             f"data rows = {n} fitted against {p} free parameters ({names}); valid: at least {need} fitted rows "
             + ("(one more than the free parameters, since no noise is stated and it is estimated from the residuals)"
                if not setup.sigma_known else "(one per free parameter)")

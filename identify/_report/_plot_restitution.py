@@ -6,6 +6,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from jaxunilat.internal import InputError
+
 
 def _data_sets(data) -> list[tuple[str | None, object]]:
     """(label, result) pairs from one result, a sequence of them or a mapping label → result."""
@@ -41,13 +43,13 @@ def plot_restitution(data=None, laws=None, *, ax=None, title: str | None = None)
     curves = dict(laws or {})
     for label, result in sets:
         if not (hasattr(result, "impact_speed") and hasattr(result, "restitution")):
-            raise ValueError(
+            raise InputError(
                 f"data {label!r} is a {type(result).__name__}; valid: results of bounce_restitution "
                 "(with impact_speed and restitution)"
             )
     for name, curve in curves.items():
         if len(curve) != 2 or np.shape(curve[0]) != np.shape(curve[1]):
-            raise ValueError(f"laws[{name!r}] must be a pair (speeds [m/s], e) of arrays of one shape")
+            raise InputError(f"laws[{name!r}] must be a pair (speeds [m/s], e) of arrays of one shape")
     from matplotlib.figure import Figure
 
     if ax is None:

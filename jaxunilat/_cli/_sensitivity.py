@@ -5,7 +5,6 @@ Light to import: everything heavy is imported inside the handler.
 
 from __future__ import annotations
 
-from ..internal._cli import argument_errors
 from ..internal._errors import EXIT_OK, InputError, RunError, UsageError
 
 
@@ -38,18 +37,16 @@ def _run_sensitivity(args) -> int:
         example = 2 if args.example is None else args.example
         kw = {} if args.h is None else dict(h=args.h)
         try:
-            with argument_errors():
-                result = coupling_sensitivity(
-                    example, t1=1.0 if args.t1 is None else args.t1, reading=args.reading, **kw
-                )
+            result = coupling_sensitivity(
+                example, t1=1.0 if args.t1 is None else args.t1, reading=args.reading, **kw
+            )
         except RuntimeError as err:  # the solver's runtime error (max_steps, non-finite)
             raise RunError(f"{_solver_failure(err)} (sensitivity coupling --t1 {args.t1})") from None
     else:
         if args.h is not None:
             raise UsageError("--h applies to the coupling only")
         example = 2 if args.example is None else args.example
-        with argument_errors():
-            result = ball_sensitivity(example, t1=3.0 if args.t1 is None else args.t1)
+        result = ball_sensitivity(example, t1=3.0 if args.t1 is None else args.t1)
     print(format_table(result))
     return EXIT_OK
 

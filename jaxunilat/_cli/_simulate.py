@@ -13,7 +13,7 @@ import warnings
 
 import numpy as np
 
-from ..internal._cli import argument_errors, input_errors, output_errors
+from ..internal._cli import input_errors, output_errors
 from ..internal._errors import EXIT_OK, InputError, RunError, UsageError
 from ._args import (
     add_solver_knobs,
@@ -238,20 +238,19 @@ def _run_simulate_ball(args) -> int:
         _check_outputs(args)
 
     start = time.perf_counter()
-    with argument_errors():
-        sol = simulate(
-            ball,
-            [x0, v0],
-            args.t1,
-            solver=args.solver,
-            dt=args.dt,
-            rtol=args.rtol,
-            atol=args.atol,
-            samples=args.samples,
-            outputs=("x", "v", "contact"),
-            throw=False,
-            **solver_knobs(args),
-        )
+    sol = simulate(
+        ball,
+        [x0, v0],
+        args.t1,
+        solver=args.solver,
+        dt=args.dt,
+        rtol=args.rtol,
+        atol=args.atol,
+        samples=args.samples,
+        outputs=("x", "v", "contact"),
+        throw=False,
+        **solver_knobs(args),
+    )
     status = int(sol.status)  # waits for the result
     wall = time.perf_counter() - start
     if status != Status.SUCCESS:
@@ -437,22 +436,21 @@ def _run_simulate_coupling(args) -> int:
     check_plot_format(args.plot)
     knobs = _coupling_budgets(args)
     start = time.perf_counter()
-    with argument_errors():
-        sol = simulate(
-            model,
-            model.paper_initial_state(),
-            args.t1,
-            solver=args.solver,
-            dt=args.dt,
-            rtol=args.rtol,
-            atol=args.atol,
-            samples=args.samples,
-            outputs=COUPLING_HEADER[1:],
-            # throw=True as in `reproduce`, so that both share one compilation; main() reports
-            # the solver's one-line message (exit 1).
-            throw=args.solver != "rk4",
-            **knobs,
-        )
+    sol = simulate(
+        model,
+        model.paper_initial_state(),
+        args.t1,
+        solver=args.solver,
+        dt=args.dt,
+        rtol=args.rtol,
+        atol=args.atol,
+        samples=args.samples,
+        outputs=COUPLING_HEADER[1:],
+        # throw=True as in `reproduce`, so that both share one compilation; main() reports
+        # the solver's one-line message (exit 1).
+        throw=args.solver != "rk4",
+        **knobs,
+    )
     status = int(sol.status)
     wall = time.perf_counter() - start
     if status != Status.SUCCESS:

@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
 
+from ..internal._errors import InputError
 from ..internal._validate import float_field, is_concrete
 from . import _rest, _rest_smooth
 from ._contact import (
@@ -133,7 +134,7 @@ class Ball(AbstractClosedFormFlight, AbstractCanRest, AbstractKinkedObservable, 
         example's κ and k_r. Keyword `overrides` replace any field.
         """
         if example not in TABLE1:
-            raise ValueError(f"example = {example!r} is out of range; valid Table 1 examples are 1-5")
+            raise InputError(f"example = {example!r} is out of range; valid Table 1 examples are 1-5")
         kappa, k_r = TABLE1[example]
         kwargs = dict(kappa=kappa, k_r=k_r)
         kwargs.update(overrides)
@@ -164,7 +165,7 @@ class Ball(AbstractClosedFormFlight, AbstractCanRest, AbstractKinkedObservable, 
         allowed = 10 * sag + ulps
         if depth <= allowed:
             return
-        raise ValueError(
+        raise InputError(
             f"x0 = {x:g} m is out of range; valid range is [{lo:g}, {hi:g}] m, between the walls "
             f"(it starts {depth:.3g} m inside the {wall} wall; at most 10*m*g/kappa = {10 * sag:.2g} m, "
             "a ball resting in contact, is allowed)"
@@ -500,7 +501,7 @@ class Ball(AbstractClosedFormFlight, AbstractCanRest, AbstractKinkedObservable, 
             return self.energy(x, v)
         if name == "contact":
             return self.in_contact(x)
-        raise ValueError(f"output = {name!r} is not supported; choose from {self.output_names}")
+        raise InputError(f"output = {name!r} is not supported; choose from {self.output_names}")
 
     def paper_initial_state(self) -> Array:
         """The paper's initial state [K90 §5.1]: x(0) = lower wall (−a), v(0) = −1/k.

@@ -38,6 +38,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array
 
+from ..internal._errors import InputError
 from ..internal._validate import check_choice, float_field
 from ._contact import AbstractContactLaw, ClampedKelvinVoigt, KelvinVoigt, rk4_step_limit
 from ._heaviside import AbstractHeaviside, Exact
@@ -192,7 +193,7 @@ class Coupling(AbstractSwitchedModel, AbstractContactModel):
         **Returns:** a `Coupling`.
         """
         if example not in TABLE2:
-            raise ValueError(f"example = {example!r} is out of range; valid Table 2 examples are 1-6")
+            raise InputError(f"example = {example!r} is out of range; valid Table 2 examples are 1-6")
         check_choice("params", params, tuple(PARAMS))
         alpha, clearance, b = TABLE2[example]
         j = transverse_inertia(COUPLING_MASS, COUPLING_LENGTH)
@@ -392,7 +393,7 @@ class Coupling(AbstractSwitchedModel, AbstractContactModel):
         if name == "contact":
             g = self.switches(y)
             return jnp.any(g > 0).astype(y.dtype)
-        raise ValueError(f"output = {name!r} is not supported; choose from {self.output_names}")
+        raise InputError(f"output = {name!r} is not supported; choose from {self.output_names}")
 
     def paper_initial_state(self) -> Array:
         """The paper's initial state [K90 §5.2]: ψ_ξ(0) = −δ, everything else 0."""

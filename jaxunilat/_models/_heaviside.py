@@ -24,6 +24,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike
 
+from ..internal._errors import InputError
 from ..internal._validate import check_range, real_number
 
 
@@ -201,6 +202,6 @@ def heaviside(name: str, eps: ArrayLike | None = None) -> AbstractHeaviside:
         return Exact()
     if name in ("logistic", "softplus"):
         if eps is None:
-            raise ValueError(f"heaviside = {name!r} needs eps (the width ε in m, > 0)")
+            raise InputError(f"heaviside = {name!r} needs eps (the width ε in m, > 0)")
         return Logistic(eps) if name == "logistic" else Softplus(eps)
-    raise ValueError(f"heaviside = {name!r} is not supported; choose one of 'exact', 'logistic', 'softplus'")
+    raise InputError(f"heaviside = {name!r} is not supported; choose one of 'exact', 'logistic', 'softplus'")

@@ -51,6 +51,8 @@ import jax
 import jax.numpy as jnp
 from jax.extend.core import jaxpr_as_fun, jaxprs_in_params
 
+from ..internal._errors import InputError
+
 #: The environment variable that forces a batching rule: "rows" or "batch".
 ENV = "JAXUNILAT_VMAP"
 MODES = ("rows", "batch")
@@ -63,7 +65,7 @@ def batching_mode() -> str:
     if forced not in _RESOLVED:
         mode = forced.strip().lower()
         if mode and mode not in MODES:
-            raise ValueError(f"{ENV} = {forced!r} is not supported; valid: {', '.join(MODES)} (or unset)")
+            raise InputError(f"{ENV} = {forced!r} is not supported; valid: {', '.join(MODES)} (or unset)")
         _RESOLVED[forced] = mode or ("rows" if jax.default_backend() == "cpu" else "batch")
     return _RESOLVED[forced]
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..internal._errors import InputError
 from ._event import ENTRY, EXIT
 
 IMPACT_COLUMNS = ("wall", "t_in", "t_out", "rate_in", "rate_out", "restitution", "peak_force")
@@ -27,7 +28,7 @@ def impact_table(sol, model) -> dict[str, np.ndarray]:
     """
     ev = sol.events
     if ev is None:
-        raise ValueError("impact_table needs a run of solver='event'")
+        raise InputError("impact_table needs a run of solver='event'")
     count = int(ev.count)
     t = np.asarray(ev.t)[:count]
     y = np.asarray(ev.y)[:count]

@@ -35,6 +35,8 @@ import os
 import re
 import warnings
 
+from ..internal._errors import InputError
+
 OPTION = "xla_cpu_small_while_loop_byte_threshold"
 #: Loops that touch up to 1 MiB per iteration become one kernel: the event mode's loop
 #: (tens of KiB per step) and each row of a per-row sweep, but not a loop vmapped over
@@ -163,7 +165,7 @@ def use_loop_kernels(byte_threshold: int = DEFAULT_BYTES) -> bool:
     already started its backend without it (a `RuntimeWarning` then says how to set it).
     """
     if isinstance(byte_threshold, bool) or not isinstance(byte_threshold, int) or byte_threshold < 1:
-        raise ValueError(f"byte_threshold = {byte_threshold!r} is out of range; valid range is integers >= 1")
+        raise InputError(f"byte_threshold = {byte_threshold!r} is out of range; valid range is integers >= 1")
     flags = os.environ.get("XLA_FLAGS", "")
     if loop_kernel_bytes(flags) is not None:
         return True

@@ -12,6 +12,7 @@ import numpy as np
 from jaxtyping import Array
 
 from .._models._model import AbstractSwitchedModel
+from ..internal._errors import InputError
 from ._event import ENTRY, EXIT, EXTREMUM, EventRecord
 
 CONTACT_COLUMNS = (
@@ -29,7 +30,7 @@ CONTACT_COLUMNS = (
 def _events(sol_or_events) -> EventRecord:
     events = getattr(sol_or_events, "events", sol_or_events)
     if not isinstance(events, EventRecord):
-        raise ValueError("this needs a run of solver='event' (its Solution carries the events)")
+        raise InputError("this needs a run of solver='event' (its Solution carries the events)")
     return events
 
 
@@ -47,7 +48,7 @@ def _meaningful(sol_or_events) -> Array | bool:
 
 def _check_count(n) -> None:
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
-        raise ValueError(f"n = {n!r} is out of range; valid range is integers >= 0 (a static count)")
+        raise InputError(f"n = {n!r} is out of range; valid range is integers >= 0 (a static count)")
 
 
 def _select(events: EventRecord, keep: Array, n: int) -> tuple[Array, Array]:
@@ -115,7 +116,7 @@ def contact_table(sol, model=None, *, wall_names: tuple[str, ...] | None = None)
     """
     ev = _events(sol)
     if np.ndim(ev.count) != 0:
-        raise ValueError("contact_table takes one trajectory; index a batched Solution first")
+        raise InputError("contact_table takes one trajectory; index a batched Solution first")
     count = int(ev.count)
     t = np.asarray(ev.t)[:count]
     y = np.asarray(ev.y)[:count]

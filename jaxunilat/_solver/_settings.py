@@ -11,6 +11,7 @@ import equinox as eqx
 import numpy as np
 from jaxtyping import Array
 
+from ..internal._errors import InputError
 from ..internal._validate import as_float_array, check_choice, check_range, is_concrete
 from ._device_cache import DeviceCache
 
@@ -244,26 +245,26 @@ def _build_settings(
         step = float(np.min(np.asarray(dt)))
         needed = float(span) / step
         if needed > MAX_STEPS_LIMIT:
-            raise ValueError(
+            raise InputError(
                 f"dt = {step:g} s needs (t1 - t0)/dt = {needed:.3g} rk4 steps, more than "
                 f"{MAX_STEPS_LIMIT:.0e}; valid range for this time span is dt >= "
                 f"{float(span) / MAX_STEPS_LIMIT:.3g} s (or shorten the span, or use solver='tsit5' or 'event')"
             )
     if max_steps is not None:
         if not isinstance(max_steps, (int, np.integer)) or not 1 <= max_steps <= MAX_STEPS_LIMIT:
-            raise ValueError(
+            raise InputError(
                 f"max_steps = {max_steps!r} is out of range; valid range is integers >= 1 and <= {MAX_STEPS_LIMIT:.0e}"
             )
         max_steps = int(max_steps)
     elif method == "rk4":
         if not (is_concrete(dt) and is_concrete(span)):
-            raise ValueError("max_steps must be given when dt or the time span is traced (rk4)")
+            raise InputError("max_steps must be given when dt or the time span is traced (rk4)")
         max_steps = int(math.ceil(float(span) / float(np.min(np.asarray(dt))))) + 16
     else:
         max_steps = DEFAULT_MAX_STEPS[method]
     for name, value, low in (("max_events", max_events, 1), ("subgrid", subgrid, 1)):
         if not isinstance(value, (int, np.integer)) or value < low:
-            raise ValueError(f"{name} = {value!r} is out of range; valid range is integers >= {low}")
+            raise InputError(f"{name} = {value!r} is out of range; valid range is integers >= {low}")
     check_choice("piece_solver", piece_solver, ("tsit5", "dopri8"))
     check_choice("flight", flight, ("closed", "integrated"))
     check_choice("autodiff", autodiff, AUTODIFF)
@@ -271,7 +272,7 @@ def _build_settings(
     if method == "rk4" and is_concrete(dt) and is_concrete(span):
         needed = math.ceil(float(span) / float(np.min(np.asarray(dt))))
         if needed > max_steps:
-            raise ValueError(
+            raise InputError(
                 f"max_steps = {max_steps} is too small for rk4: (t1 - t0)/dt = {needed} steps; "
                 "increase max_steps or dt"
             )

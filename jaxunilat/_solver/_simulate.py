@@ -23,6 +23,7 @@ from jaxtyping import Array, ArrayLike
 from .._models._contact import RK4_STEPS_PER_CONTACT, HuntCrossley
 from .._models._heaviside import Exact
 from .._models._model import AbstractCanRest, AbstractContactModel, AbstractModel, AbstractSwitchedModel
+from ..internal._errors import InputError
 from ..internal._executables import kept_call
 from ..internal._validate import (
     InputTypeError,
@@ -440,14 +441,14 @@ def _time_span(t_span):
         return _ZERO, np.asarray(t_span, dtype=np.float64)  # the common case: t1 > t0 = 0
     if isinstance(t_span, (tuple, list)):
         if len(t_span) != 2:
-            raise ValueError(f"t_span = {t_span!r} must be t1 or a pair (t0, t1), in s")
+            raise InputError(f"t_span = {t_span!r} must be t1 or a pair (t0, t1), in s")
         t0, t1 = t_span
     else:
         t0, t1 = 0.0, t_span
     check_range("t0", t0, unit="s")
     check_range("t1", t1, unit="s")
     if is_concrete(t0) and is_concrete(t1) and not float(t1) > float(t0):
-        raise ValueError(f"t1 = {float(t1):g} s is out of range; valid range is t1 > t0 = {float(t0):g} s")
+        raise InputError(f"t1 = {float(t1):g} s is out of range; valid range is t1 > t0 = {float(t0):g} s")
     return as_float_array(t0), as_float_array(t1)
 
 
@@ -527,11 +528,11 @@ def simulate(
     settings and default save times built from plain numbers are cached.
     """
     if not isinstance(model, AbstractModel):
-        raise ValueError(f"model = {model!r} is not a jaxunilat model (e.g. Ball.table1(2))")
+        raise InputError(f"model = {model!r} is not a jaxunilat model (e.g. Ball.table1(2))")
     if not _loop_kernels._CHECKED:
         _loop_kernels.warn_if_missing(stacklevel=3)
     if not jax.config.jax_enable_x64:
-        raise ValueError(
+        raise InputError(
             "precision = float32 is not supported (jax_enable_x64 is off); valid: float64. In float32 "
             "the step at a contact's kink must shrink below the time resolution (1.2e-7*t, t + dt == t), "
             "so Tsit5 stalls at the first contacts (t ~ 0.1 s), and penetrations below 1.2e-7*|x| are "
@@ -604,7 +605,7 @@ def _checked_outputs(model, outputs) -> tuple[str, ...]:
         )
     outputs = tuple(outputs)
     if not outputs:
-        raise ValueError("outputs = () is empty; request at least one of " + ", ".join(model.output_names))
+        raise InputError("outputs = () is empty; request at least one of " + ", ".join(model.output_names))
     for name in outputs:
         check_choice("output", name, model.output_names)
     return outputs
@@ -622,7 +623,7 @@ def _check_y0(model, y0) -> Array:
         return _INITIAL_STATES.get(host.tobytes(), lambda: host)
     y0 = as_float_array(real_number("y0", y0))
     if y0.shape != (len(model.state_names),):
-        raise ValueError(
+        raise InputError(
             f"y0 has shape {y0.shape}; expected ({len(model.state_names)},) for the state "
             f"({', '.join(model.state_names)})"
         )
@@ -662,10 +663,10 @@ def _save_times(t0, t1, ts, samples, num_outputs: int):
     [t0, t1], refused beyond `MAX_OUTPUT_BYTES` before anything is allocated."""
     if ts is None:
         if not isinstance(samples, (int, np.integer)) or samples < 2:
-            raise ValueError(f"samples = {samples!r} is out of range; valid range is integers >= 2")
+            raise InputError(f"samples = {samples!r} is out of range; valid range is integers >= 2")
         most = MAX_OUTPUT_BYTES // (8 * (num_outputs + 1))
         if samples > most:
-            raise ValueError(
+            raise InputError(
                 f"samples = {samples!r} is out of range: the save times and {num_outputs} outputs would "
                 f"take {8 * samples * (num_outputs + 1) / 2**30:.3g} GiB; valid range is integers 2 to "
                 f"{most} (at most {MAX_OUTPUT_BYTES / 2**30:g} GiB)"
@@ -673,11 +674,11 @@ def _save_times(t0, t1, ts, samples, num_outputs: int):
         return _default_times(t0, t1, int(samples))
     ts = as_float_array(real_number("ts", ts, unit="s"))
     if ts.ndim != 1 or ts.shape[0] < 1:
-        raise ValueError(f"ts has shape {ts.shape}; expected a non-empty 1-D array of times in s")
+        raise InputError(f"ts has shape {ts.shape}; expected a non-empty 1-D array of times in s")
     if is_concrete(ts) and is_concrete(t0) and is_concrete(t1):
         arr = np.asarray(ts)
         if np.any(np.diff(arr) < 0) or arr[0] < float(t0) or arr[-1] > float(t1):
-            raise ValueError(f"ts must be sorted within [t0, t1] = [{float(t0):g}, {float(t1):g}] s")
+            raise InputError(f"ts must be sorted within [t0, t1] = [{float(t0):g}, {float(t1):g}] s")
     return t0, t1, ts
 
 
@@ -705,19 +706,19 @@ def _heaviside_type(model) -> type | None:
 
 def _checked_event_mode(model, max_events) -> None:
     if isinstance(model, AbstractContactModel) and not isinstance(model.heaviside, Exact):
-        raise ValueError(
+        raise InputError(
             f"heaviside = {type(model.heaviside).__name__} is not supported with solver='event'; "
             "the event mode solves the exact model: use heaviside=Exact()"
         )
     if not isinstance(model, AbstractSwitchedModel):
-        raise ValueError(
+        raise InputError(
             f"solver = 'event' is not supported for {type(model).__name__}: the event mode needs "
             "an AbstractSwitchedModel (switching functions and region vector fields)"
         )
     if isinstance(max_events, (int, np.integer)):
         per_event = 8 * (EventRow.HEAD + len(model.state_names))
         if max_events > MAX_OUTPUT_BYTES // per_event:
-            raise ValueError(
+            raise InputError(
                 f"max_events = {max_events!r} is out of range: the event buffer would take "
                 f"{max_events * per_event / 2**30:.3g} GiB; valid range is integers 1 to "
                 f"{MAX_OUTPUT_BYTES // per_event} (at most {MAX_OUTPUT_BYTES / 2**30:g} GiB)"
@@ -759,7 +760,7 @@ def _check_rk4_step(model, dt, y0) -> None:
         why = f"a tenth of the contact time t_c = {form} = {t_c:.3g} s"
     else:
         why = "the time scale of the contact's damping (1/|lambda| of its fastest mode)"
-    raise ValueError(
+    raise InputError(
         f"dt = {step:g} s is beyond rk4's stability limit for this contact; valid range is "
         f"(0, {limit:.3g}] s ({why}); use dt <= {limit:.3g} s, or solver='tsit5' or solver='event' "
         "(allow_coarse_dt=True runs it anyway, losing contacts)"

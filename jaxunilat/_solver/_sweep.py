@@ -30,6 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from ..internal._errors import InputError
 from ._simulate import _TRACES
 
 AXIS = "batch"
@@ -46,12 +47,12 @@ def _normalize_axes(in_axes, n_args: int) -> tuple[int | None, ...]:
     else:
         axes = tuple(in_axes)
     if len(axes) != n_args:
-        raise ValueError(
+        raise InputError(
             f"in_axes = {in_axes!r} has {len(axes)} entries; expected one per argument ({n_args})"
         )
     for axis in axes:
         if axis not in (0, None):
-            raise ValueError(f"in_axes entry {axis!r} is out of range; valid entries are 0 (batched) or None")
+            raise InputError(f"in_axes entry {axis!r} is out of range; valid entries are 0 (batched) or None")
     return axes
 
 
@@ -116,12 +117,12 @@ def _batch_size(args, axes) -> int:
         for leaf in jax.tree_util.tree_leaves(arg)
     }
     if not sizes:
-        raise ValueError("in_axes marks no argument as batched (0); at least one must be")
+        raise InputError("in_axes marks no argument as batched (0); at least one must be")
     if None in sizes or len(sizes) != 1:
-        raise ValueError(f"the batched arguments' leading axes disagree or are missing: sizes {sizes}")
+        raise InputError(f"the batched arguments' leading axes disagree or are missing: sizes {sizes}")
     (n,) = sizes
     if n < 1:
-        raise ValueError("the batch is empty; pass at least one row")
+        raise InputError("the batch is empty; pass at least one row")
     return n
 
 
@@ -191,7 +192,7 @@ def _check_same(args, mesh_devices) -> None:
         crc = zlib.crc32(f"{host.shape}{host.dtype}".encode() + host.tobytes(), crc)
     every = np.asarray(multihost_utils.process_allgather(np.array([crc], np.uint32))).ravel()
     if len(set(every.tolist())) > 1:
-        raise ValueError(
+        raise InputError(
             f"args differ between processes (fingerprints {every.tolist()}, one per process); "
             "every process must call sweep with the same arguments, in the same order"
         )
@@ -243,13 +244,13 @@ def sweep(
 
 def _prepare(fn, args, in_axes, devices, batch_size):
     if not callable(fn):
-        raise ValueError(f"fn = {fn!r} is not callable")
+        raise InputError(f"fn = {fn!r} is not callable")
     axes = _normalize_axes(in_axes, len(args))
     devices = tuple(jax.devices() if devices is None else devices)
     if not devices:
-        raise ValueError("devices is empty; pass at least one device or None for all")
+        raise InputError("devices is empty; pass at least one device or None for all")
     if batch_size is not None and (not isinstance(batch_size, (int, np.integer)) or batch_size < 1):
-        raise ValueError(f"batch_size = {batch_size!r} is out of range; valid range is None or integers >= 1")
+        raise InputError(f"batch_size = {batch_size!r} is out of range; valid range is None or integers >= 1")
     n = _batch_size(args, axes)
     n_pad = -n % len(devices)
     _, batched, replicated = _program(fn, axes, devices, batch_size)

@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._solver._simulate import _TRACES
+from ..internal._errors import InputError
 from ..internal._validate import check_finite, check_range
 
 #: The differentiated parameters (log multipliers), in this order.
@@ -173,12 +174,12 @@ def gradient_growth(
     if model is None:
         model = Coupling.table2(2)
     if not isinstance(model, Coupling):
-        raise ValueError(f"model = {model!r} is not supported; valid: a jaxunilat.Coupling")
+        raise InputError(f"model = {model!r} is not supported; valid: a jaxunilat.Coupling")
     if model.k_r is None:
-        raise ValueError("model.k_r = None is not supported; valid: a damping k_r > 0 (N*s/rad)")
+        raise InputError("model.k_r = None is not supported; valid: a damping k_r > 0 (N*s/rad)")
     horizons = np.asarray(horizons, float).ravel()
     if horizons.size == 0:
-        raise ValueError("horizons = () is not supported; valid: one or more window lengths > 0 s")
+        raise InputError("horizons = () is not supported; valid: one or more window lengths > 0 s")
     for t in horizons:
         check_finite("horizons", float(t))
         check_range("horizons", float(t), lo=0.0, lo_open=True)

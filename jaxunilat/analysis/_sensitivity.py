@@ -32,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._solver._simulate import _TRACES
+from ..internal._errors import InputError
 
 #: The coupling's parameters `coupling_sensitivity` differentiates in, in its table's order.
 COUPLING_PARAMETERS = ("clearance", "alpha", "b", "kappa", "k_r", "h")
@@ -351,7 +352,7 @@ def ball_sensitivity(
     settings = {**dict(solver="event", rtol=1e-12, atol=1e-12), **settings}
     kappa, k_r = TABLE1[example] if example in TABLE1 else (None, None)
     if kappa is None:
-        raise ValueError(f"example = {example!r} is out of range; valid Table 1 examples are 1-5")
+        raise InputError(f"example = {example!r} is out of range; valid Table 1 examples are 1-5")
     base = {k: np.asarray(v) for k, v in dict(kappa=kappa, k_r=k_r, drag=PAPER_DRAG, gap=PAPER_GAP).items()}
 
     settings = _hashable(settings)

@@ -14,7 +14,6 @@ between releases.
 
 from ._cli import (
     COMMANDS_GROUP as COMMANDS_GROUP,
-    argument_errors as argument_errors,
     check_plot_format as check_plot_format,
     input_errors as input_errors,
     output_errors as output_errors,

@@ -19,6 +19,8 @@ from collections.abc import Iterable, Iterator, Sequence
 
 import numpy as np
 
+from ._errors import InputError
+
 
 def _same_file(a: str, b: str) -> bool:
     """Whether two paths name one file: the same spelling, relative or absolute, or a
@@ -99,13 +101,13 @@ def write_atomically(
     kind = special_kind(path)
     if kind is not None:
         if special == "refuse" or kind not in STREAMABLE:
-            raise ValueError(f"output path {os.fspath(path)!r} is a {kind}; give a regular file")
+            raise InputError(f"output path {os.fspath(path)!r} is a {kind}; give a regular file")
         with _write_through(os.fspath(path), mode, **open_args) as f:
             yield f
         return
     target = os.path.realpath(os.fspath(path))
     if os.path.isdir(target):
-        raise ValueError(f"output path {os.fspath(path)!r} is a directory; give a file name")
+        raise InputError(f"output path {os.fspath(path)!r} is a directory; give a file name")
     if not replace and os.path.lexists(target):
         raise FileExistsError(target)
     folder, name = os.path.split(target)
@@ -135,7 +137,7 @@ def _write_through(path: str, mode: str, **open_args) -> Iterator:
     fd = _open_for_writing(path)
     try:
         if stat.S_ISREG(os.fstat(fd).st_mode):  # replaced by a regular file meanwhile
-            raise ValueError(f"output path {path!r} became a regular file while writing; run again")
+            raise InputError(f"output path {path!r} became a regular file while writing; run again")
         os.set_blocking(fd, True)
         view = memoryview(data)
         while view:
@@ -159,7 +161,7 @@ def _open_for_writing(path: str) -> int:
             if err.errno != errno.ENXIO:
                 raise
             if time.monotonic() > deadline:
-                raise ValueError(
+                raise InputError(
                     f"output path {path!r} is a FIFO that no process is reading "
                     f"(waited {FIFO_GRACE:g} s); start its reader first"
                 ) from None
@@ -168,7 +170,7 @@ def _open_for_writing(path: str) -> int:
 
 def _move(tmp: str, target: str, replace: bool) -> None:
     if special_kind(target) is not None:  # appeared meanwhile: never rename over it
-        raise ValueError(f"output path {target!r} is a {special_kind(target)}; refusing to replace it")
+        raise InputError(f"output path {target!r} is a {special_kind(target)}; refusing to replace it")
     if replace:
         os.replace(tmp, target)
         return
@@ -193,16 +195,16 @@ def check_output_path(path: str | os.PathLike, *, inputs: Iterable[str | os.Path
     """
     path = os.fspath(path)
     if os.path.isdir(path):
-        raise ValueError(f"output path {path!r} is a directory; give a file name")
+        raise InputError(f"output path {path!r} is a directory; give a file name")
     kind = special_kind(path)
     if kind is not None and kind not in STREAMABLE:
-        raise ValueError(f"output path {path!r} is a {kind}; give a regular file")
+        raise InputError(f"output path {path!r} is a {kind}; give a regular file")
     parent = os.path.dirname(os.path.abspath(path))
     if kind is None and not os.path.isdir(parent):
-        raise ValueError(f"output path {path!r}: the directory {parent!r} does not exist")
+        raise InputError(f"output path {path!r}: the directory {parent!r} does not exist")
     for src in inputs:
         if src is not None and _same_file(path, os.fspath(src)):
-            raise ValueError(
+            raise InputError(
                 f"output path {path!r} is the input file {os.fspath(src)!r}; refusing to overwrite it"
             )
 
@@ -225,17 +227,17 @@ def check_output_paths(
         try:
             check_output_path(path)
         except ValueError as err:
-            raise ValueError(f"{flag}: {err}") from None
+            raise InputError(f"{flag}: {err}") from None
         for name, src in inputs:
             if _same_file(path, src):
-                raise ValueError(
+                raise InputError(
                     f"{flag} {path!r} is the input {name} {src!r}; refusing to overwrite it "
                     "(choose another output path)"
                 )
     for i, (flag_a, path_a) in enumerate(named):
         for flag_b, path_b in named[i + 1 :]:
             if _same_file(path_a, path_b):
-                raise ValueError(
+                raise InputError(
                     f"{flag_a} and {flag_b} name the same file {path_a!r}; give each its own path"
                 )
 
@@ -259,10 +261,10 @@ def check_output_dir(
     path = os.fspath(path)
     if os.path.lexists(path) and not os.path.isdir(path):
         kind = "a broken link" if not os.path.exists(path) else "an existing file"
-        raise ValueError(f"{flag} {path!r} is {kind}, not a directory; give a directory (created if missing)")
+        raise InputError(f"{flag} {path!r} is {kind}, not a directory; give a directory (created if missing)")
     parent = os.path.dirname(os.path.abspath(path))
     if parent_must_exist and not os.path.isdir(parent):
-        raise ValueError(f"{flag} {path!r}: the directory {parent!r} does not exist")
+        raise InputError(f"{flag} {path!r}: the directory {parent!r} does not exist")
     if os.path.isdir(path):
         check_output_paths(
             *((f"{flag} file {name}", os.path.join(path, name)) for name in files), inputs=inputs
@@ -298,7 +300,7 @@ def write_csv(
     if len(header) != len(columns):
         raise ValueError(f"header has {len(header)} names but {len(columns)} columns were given")
     if any("," in h or "\n" in h for h in header):
-        raise ValueError(f"header = {header!r}: column names must not contain commas or line breaks")
+        raise InputError(f"header = {header!r}: column names must not contain commas or line breaks")
     arrays = [_column(name, c) for name, c in zip(header, columns, strict=True)]
     if len({len(a) for a in arrays}) > 1:
         raise ValueError(f"columns must all have the same length, got {[len(a) for a in arrays]}")
@@ -315,7 +317,7 @@ def _column(name: str, column) -> np.ndarray:
     if a.dtype.kind in "OUS":
         a = np.asarray([str(v) for v in a.ravel()], dtype=object)
         if any(("," in v or "\n" in v or "\r" in v) for v in a):
-            raise ValueError(f"column {name!r}: text entries must not contain commas or line breaks")
+            raise InputError(f"column {name!r}: text entries must not contain commas or line breaks")
         return a
     if a.dtype.kind not in "fiub":
         from ._validate import InputTypeError
@@ -337,7 +339,7 @@ def read_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
         header = f.readline().strip().split(",")
     data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
     if data.shape[1] != len(header):
-        raise ValueError(f"{os.fspath(path)!r}: {len(header)} header names but {data.shape[1]} columns")
+        raise InputError(f"{os.fspath(path)!r}: {len(header)} header names but {data.shape[1]} columns")
     return {name: data[:, i] for i, name in enumerate(header)}
 
 
