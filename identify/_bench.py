@@ -62,7 +62,7 @@ def identification(size, log) -> dict:
         return {"status": f"skipped at size {size.name}", "rows": []}
     from jaxunilat.bench import data_sets
 
-    paths = data_sets()
+    paths = fit_sets(data_sets())
     if not paths:
         return {"status": "skipped: the bundled data/ folder was not found", "rows": []}
     paths = sorted(paths, key=lambda p: not p.endswith("drop_trace.csv"))[: size.identify_sets]
@@ -71,6 +71,17 @@ def identification(size, log) -> dict:
         warm = "" if row["warm_s"] is None else f", warm {row['warm_s']:.1f} s"
         log(f"  identify.fit {row['data']}: first call {row['first_s']:.1f} s (with compile){warm}")
     return {"status": "measured", "rows": rows}
+
+
+def fit_sets(paths: list[str]) -> list[str]:
+    """The `jaxunilat-data` files among `paths` (`identify.fit` reads them as they are);
+    raw tool exports, such as phyphox tables, need `jaxunilat import` first."""
+    out = []
+    for path in paths:
+        with open(path, encoding="utf-8", errors="replace") as f:
+            if f.readline().startswith("# jaxunilat-data"):
+                out.append(path)
+    return out
 
 
 def _fit_row(path: str, runs: int) -> dict:

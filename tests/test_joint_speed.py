@@ -8,7 +8,10 @@ of files, starts, windows and passes; files of the same structure fitted later r
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
+import pytest
 
 import identify
 from identify._bench import throws
@@ -51,3 +54,19 @@ def test_a_joint_fit_compiles_once_per_law_and_auto_reuses_the_programs():
     assert auto.simulations == chosen.simulations
     for mine, single in zip(auto.datasets, chosen.datasets, strict=True):
         assert np.isclose(mine["restitution_alone"]["value"], single["restitution_alone"]["value"], rtol=1e-9)
+
+
+def test_bench_fits_only_jaxunilat_data_files():
+    """The bench's identification row fits the bundled `jaxunilat-data` files, never a raw
+    phyphox export (which `identify.fit` refuses: it needs `jaxunilat import` first)."""
+    from identify._bench import fit_sets
+    from jaxunilat.bench import data_sets
+
+    paths = data_sets()
+    if not paths:
+        pytest.skip("the bundled data/ folder is not present")
+    chosen = {os.path.basename(p) for p in fit_sets(paths)}
+    assert "drop_trace.csv" in chosen
+    assert not any(name.startswith("phyphox_") for name in chosen)
+    for path in fit_sets(paths):
+        identify.load_dataset(path)  # each one reads
