@@ -60,9 +60,9 @@ def identification(size, log) -> dict:
     compilation, the fastest later one warm."""
     if size.identify_sets == 0:
         return {"status": f"skipped at size {size.name}", "rows": []}
-    from jaxunilat.bench import data_sets
+    from jaxunilat.internal import bundled_data
 
-    paths = fit_sets(data_sets())
+    paths = fit_sets(bundled_data("*.csv"))
     if not paths:
         return {"status": "skipped: the bundled data/ folder was not found", "rows": []}
     paths = sorted(paths, key=lambda p: not p.endswith("drop_trace.csv"))[: size.identify_sets]

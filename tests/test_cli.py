@@ -374,10 +374,11 @@ def test_bundled_data_is_found_from_any_working_folder(tmp_path, monkeypatch):
     beside the package, not only in the working folder."""
     import os
 
-    import jaxunilat._bench._main as bench
-
-    data_sets = getattr(bench, "data_sets", None) or bench._data_sets
     from identify._cli._identify import default_data_path
+    from jaxunilat.internal import bundled_data
+
+    def data_sets():
+        return bundled_data("*.csv")
 
     monkeypatch.chdir(tmp_path)
     path = default_data_path()

@@ -60,9 +60,9 @@ def test_bench_fits_only_jaxunilat_data_files():
     """The bench's identification row fits the bundled `jaxunilat-data` files, never a raw
     phyphox export (which `identify.fit` refuses: it needs `jaxunilat import` first)."""
     from identify._bench import fit_sets
-    from jaxunilat.bench import data_sets
+    from jaxunilat.internal import bundled_data
 
-    paths = data_sets()
+    paths = bundled_data("*.csv")
     if not paths:
         pytest.skip("the bundled data/ folder is not present")
     chosen = {os.path.basename(p) for p in fit_sets(paths)}

@@ -40,7 +40,6 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..internal._io import bundled_data
 from . import _peers as peers, _user as user
 from ._goals import THROUGHPUT_ERROR, TIGHT_ERROR, goal_table as goal_table, goals
 from ._scale import SAMPLES, T1, Y0, process_section
@@ -857,11 +856,6 @@ ROW_GROUP = "jaxunilat.bench"
 #: The rows `bench.json` always has, with what each holds when its package is missing:
 #: `identify` registers them (the bench never imports it).
 EXPECTED_ROWS = {"identification": {"rows": []}, "joint_fit": {}}
-
-
-def data_sets() -> list[str]:
-    """The bundled data sets (`data/*.csv` of the source tree, sorted), or [] when not shipped."""
-    return bundled_data("*.csv")
 
 
 def registered_rows() -> dict:

@@ -5,8 +5,8 @@ its goals, and the scipy reference it measures errors against.
 `work_precision(size)` runs only its work–precision section. `load(path)` reads a
 `bench.json` (files written before the goals had names, keyed P1–P5 and P7–P10, come
 back with today's keys: `upgrade`); `GOALS` holds each goal's target and unit.
-`data_sets()` lists the bundled data sets that rows registered by other packages (entry
-points of the group `jaxunilat.bench`) may fit. The peers and the reference need scipy
+Rows registered by other packages (entry points of the group `jaxunilat.bench`) find the
+bundled data sets with `jaxunilat.internal.bundled_data`. The peers and the reference need scipy
 (the `bench` extra); importing this module does not load it.
 """
 
@@ -14,7 +14,6 @@ from .._bench._goals import GOALS as GOALS, OLD_KEYS as OLD_KEYS, load as load, 
 from .._bench._main import (
     SIZES as SIZES,
     Size as Size,
-    data_sets as data_sets,
     goal_table as goal_table,
     run_bench as run_bench,
     work_precision as work_precision,
