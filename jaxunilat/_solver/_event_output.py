@@ -217,22 +217,54 @@ def _row_facts(rec, layout: StepRow):
     return rec[:, layout.FIRST].astype(jnp.int32), jnp.any(rec[:, layout.mask] != 0, axis=1)
 
 
+#: Save times per chunk in `_contact_steps_sequential`: a chunk with no time in contact
+#: costs one branch instead of a loop iteration per time.
+_CHUNK = 32
+
+
 def _contact_steps_sequential(rec, n_rec, ts, *, layout: StepRow, step_to):
-    """`_contact_steps` as one scan over the save times: each time's row is the previous
-    time's or the next one (every recorded row holds at least one save time), and a step
-    is taken only at the times in contact."""
-    n = rec.shape[1] - layout.width(0)
+    """`_contact_steps` as loops that compile into the solve's kernel: each time's row by
+    a running count of the rows' first save times (no scatter, which would keep the loop
+    from being one kernel), then a scan over chunks of `_CHUNK` times that steps only in
+    the chunks that hold a time in contact, one time after the other (a contact lasts a
+    few save times, so most chunks cost one branch)."""
+    n_ts, n = ts.shape[0], rec.shape[1] - layout.width(0)
     firsts, in_contact = _row_facts(rec, layout)
-    last = jnp.maximum(n_rec - 1, 0)
+    index = _running_sum(_row_starts(firsts, n_rec, n_ts))
+    contact = in_contact[index]
+    size = min(n_ts, _CHUNK)
+    chunks = -(-n_ts // size)
+    pad = chunks * size - n_ts
 
-    def body(r, s_and_p):
-        s, p = s_and_p
-        r = r + ((r < last) & (firsts[jnp.minimum(r + 1, rec.shape[0] - 1)] <= p))
-        row = jax.lax.dynamic_index_in_dim(rec, r, keepdims=False)
-        y = jax.lax.cond(in_contact[r], lambda: step_to(s, row), lambda: jnp.zeros(n, rec.dtype))
-        return r, (r, in_contact[r], y)
+    def padded(values, fill):
+        values = jnp.concatenate([values, jnp.full(pad, fill, values.dtype)]) if pad else values
+        return values.reshape(chunks, size)
 
-    return jax.lax.scan(body, jnp.zeros((), jnp.int32), (ts, jnp.arange(ts.shape[0])))[1]
+    def one(_, time):
+        s, i, inside = time
+        row = jax.lax.dynamic_index_in_dim(rec, i, keepdims=False)
+        return None, jax.lax.cond(inside, lambda: step_to(s, row), lambda: jnp.zeros(n, rec.dtype))
+
+    def chunk(_, times):
+        return None, jax.lax.cond(
+            jnp.any(times[2]),
+            lambda: jax.lax.scan(one, None, times)[1],
+            lambda: jnp.zeros((size, n), rec.dtype),
+        )
+
+    times = (padded(ts, ts[-1]), padded(index, 0), padded(contact, False))
+    y = jax.lax.scan(chunk, None, times)[1].reshape(-1, n)[:n_ts]
+    return index, contact, y
+
+
+def _row_starts(firsts, n_rec, n_ts):
+    """1 at the first save time of each recorded row after the first, else 0 (n_ts
+    entries): a loop over the rows."""
+
+    def mark(r, marks):
+        return jax.lax.dynamic_update_index_in_dim(marks, marks[firsts[r]] + 1, firsts[r], 0)
+
+    return jax.lax.fori_loop(1, n_rec, mark, jnp.zeros(n_ts, jnp.int32))
 
 
 def _contact_steps_vectorized(rec, n_rec, ts, *, layout: StepRow, step_to, few=64):
