@@ -186,19 +186,40 @@ def _count_at_or_before(ts, t):
 def _rows_of_times(rec, n_rec, n_ts, layout: StepRow):
     """The recorded row that holds each save time. Rows hold consecutive runs of save
     times (column `FIRST`: the index of a row's first one), so marking where each run
-    starts and counting the marks gives every time its row."""
-    rows = rec.shape[0]
-    starts = jax.lax.stop_gradient(rec[1:, layout.FIRST]).astype(jnp.int32)
-    later = jnp.arange(1, rows) < n_rec
-    marks = jnp.zeros(n_ts, jnp.int32).at[jnp.where(later, starts, n_ts)].add(1, mode="drop")
+    starts and counting the marks gives every time its row. On a CPU the marks are set
+    by a loop over the rows (a scatter would keep the solve's loop from being one
+    kernel); elsewhere by a scatter."""
+    firsts = _row_facts(rec, layout)[0]
+    marks = jax.lax.platform_dependent(
+        firsts,
+        n_rec,
+        cpu=functools.partial(_row_starts_loop, n_ts=n_ts),
+        default=functools.partial(_row_starts_scatter, n_ts=n_ts),
+    )
     return _running_sum(marks)
+
+
+def _row_starts_loop(firsts, n_rec, *, n_ts):
+    """1 at the first save time of each recorded row after the first, else 0 (n_ts
+    entries): a loop over the rows."""
+
+    def mark(r, marks):
+        return jax.lax.dynamic_update_index_in_dim(marks, marks[firsts[r]] + 1, firsts[r], 0)
+
+    return jax.lax.fori_loop(1, n_rec, mark, jnp.zeros(n_ts, jnp.int32))
+
+
+def _row_starts_scatter(firsts, n_rec, *, n_ts):
+    """`_row_starts_loop` as one scatter."""
+    later = jnp.arange(1, firsts.shape[0]) < n_rec
+    return jnp.zeros(n_ts, jnp.int32).at[jnp.where(later, firsts[1:], n_ts)].add(1, mode="drop")
 
 
 def _contact_steps(rec, n_rec, ts, layout: StepRow, step_to):
     """For each save time: its recorded row, whether that row is a contact, and there the
     pair's step from the row's start (`step_to(s, row)`; zeros at times in flight).
 
-    On a CPU one sequential scan over the save times (`_contact_steps_sequential`), all
+    On a CPU loops that step only where a contact is (`_contact_steps_sequential`), all
     in one loop kernel with `use_loop_kernels`; on other platforms vectorized
     (`_contact_steps_vectorized`). Both give the same numbers.
     """
@@ -223,15 +244,13 @@ _CHUNK = 32
 
 
 def _contact_steps_sequential(rec, n_rec, ts, *, layout: StepRow, step_to):
-    """`_contact_steps` as loops that compile into the solve's kernel: each time's row by
-    a running count of the rows' first save times (no scatter, which would keep the loop
-    from being one kernel), then a scan over chunks of `_CHUNK` times that steps only in
+    """`_contact_steps` as loops that compile into the solve's kernel: each time's row
+    (`_rows_of_times`), then a scan over chunks of `_CHUNK` times that steps only in
     the chunks that hold a time in contact, one time after the other (a contact lasts a
     few save times, so most chunks cost one branch)."""
     n_ts, n = ts.shape[0], rec.shape[1] - layout.width(0)
-    firsts, in_contact = _row_facts(rec, layout)
-    index = _running_sum(_row_starts(firsts, n_rec, n_ts))
-    contact = in_contact[index]
+    index = _rows_of_times(rec, n_rec, n_ts, layout)
+    contact = _row_facts(rec, layout)[1][index]
     size = min(n_ts, _CHUNK)
     chunks = -(-n_ts // size)
     pad = chunks * size - n_ts
@@ -255,16 +274,6 @@ def _contact_steps_sequential(rec, n_rec, ts, *, layout: StepRow, step_to):
     times = (padded(ts, ts[-1]), padded(index, 0), padded(contact, False))
     y = jax.lax.scan(chunk, None, times)[1].reshape(-1, n)[:n_ts]
     return index, contact, y
-
-
-def _row_starts(firsts, n_rec, n_ts):
-    """1 at the first save time of each recorded row after the first, else 0 (n_ts
-    entries): a loop over the rows."""
-
-    def mark(r, marks):
-        return jax.lax.dynamic_update_index_in_dim(marks, marks[firsts[r]] + 1, firsts[r], 0)
-
-    return jax.lax.fori_loop(1, n_rec, mark, jnp.zeros(n_ts, jnp.int32))
 
 
 def _contact_steps_vectorized(rec, n_rec, ts, *, layout: StepRow, step_to, few=64):
