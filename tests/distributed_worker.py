@@ -19,16 +19,24 @@ they run) and, on process 0, `OUT/result.npz` (`x` [m] at the save times [s] `ts
 `kappa` [N/m]). A watchdog ends a process that has no result `--watchdog` seconds after start-up
 (a peer hangs) with exit status 3 and a message on stderr; `jax.distributed` itself
 aborts the processes when one dies (no heartbeat for `--heartbeat` seconds).
+
+Exit status 2 and one line on stderr: process 0 found the coordinator's port taken (it
+tries to bind it before starting `jax.distributed`, whose service would crash on it; the
+other processes cannot tell a stranger on that port from the coordinator and end after
+`--init-timeout`), or `sweep` refused its input (`InputError`: e.g. a function or grid
+that differs between processes).
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import faulthandler
 import functools
 import hashlib
 import json
 import os
+import socket
 import sys
 import threading
 import time
@@ -39,6 +47,8 @@ import numpy as np
 Y0 = (-0.39, -3.0)
 #: The exit status of a process that its watchdog ended.
 WATCHDOG_EXIT = 3
+#: The exit status of bad input: a taken coordinator port, or a sweep that refused its input.
+INPUT_EXIT = 2
 
 #: The global rows this process computed (appended from the running program).
 ROWS: list[int] = []
@@ -95,6 +105,39 @@ def _watchdog(seconds: float, process: int) -> None:
     faulthandler.dump_traceback_later(seconds + 5, exit=True)
 
 
+def _port_taken(coordinator: str) -> str | None:
+    """Why process 0 cannot serve `coordinator` (HOST:PORT): one line naming the address,
+    or None when the port is free (or cannot be checked: then jax reports).
+
+    jax.distributed's service binds every interface on the coordinator's port
+    (`[::]:PORT`, or `JAX_COORDINATOR_BIND_ADDRESS`); this binds the same, as gRPC does
+    (SO_REUSEADDR: a port whose last connection is in TIME_WAIT is free). A port that
+    another program takes between this check and jax's bind still crashes the service."""
+    bind = os.environ.get("JAX_COORDINATOR_BIND_ADDRESS") or "[::]:" + coordinator.rpartition(":")[2]
+    host, _, port = bind.rpartition(":")
+    try:
+        family, kind, proto, _, address = socket.getaddrinfo(
+            host.strip("[]") or None, int(port), type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE
+        )[0]
+        probe = socket.socket(family, kind, proto)
+    except (OSError, ValueError):
+        return None  # not an address this machine can bind: jax says why
+    with probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        if family == socket.AF_INET6:
+            probe.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY, 0)  # IPv4 too, as gRPC
+        try:
+            probe.bind(address)
+        except OSError as e:
+            if e.errno not in (errno.EADDRINUSE, errno.EACCES):
+                return None
+            return (
+                f"distributed_worker: cannot start the coordinator at {coordinator} (binding {bind}: "
+                f"{e.strerror}); choose another port in --coordinator HOST:PORT"
+            )
+    return None
+
+
 def _parse(argv):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--coordinator", help="HOST:PORT of process 0 (default: SLURM's, via jax)")
@@ -115,9 +158,14 @@ def _parse(argv):
 
 def main(argv=None) -> int:
     args = _parse(argv)
+    taken = args.coordinator and args.process_id == 0 and _port_taken(args.coordinator)
+    if taken:
+        print(taken, file=sys.stderr)
+        return INPUT_EXIT
     import jax
 
     import jaxunilat as ju
+    from jaxunilat.internal import InputError
 
     jax.config.update("jax_cpu_collectives_implementation", "gloo")
     jax.distributed.initialize(
@@ -139,7 +187,12 @@ def main(argv=None) -> int:
         time.sleep(10 * args.watchdog)
     kappa = grid(args.rows)
     rows = np.arange(args.rows)
-    x = np.asarray(ju.sweep(functools.partial(trajectory, t1=args.t1), rows, kappa))
+    try:
+        x = np.asarray(ju.sweep(functools.partial(trajectory, t1=args.t1), rows, kappa))
+    except InputError as e:  # refused on every process: nothing ran
+        print(f"distributed_worker: process {me}: {e}", file=sys.stderr, flush=True)
+        jax.distributed.shutdown()
+        return INPUT_EXIT
     os.makedirs(args.out, exist_ok=True)
     record = {
         "process": me,

@@ -7,6 +7,10 @@ process), and each row must be computed exactly once: every process records the 
 rows its devices ran (a `jax.debug.callback` inside the row function), and their union
 is the grid, without overlap (the padding rows, copies of the last row, aside).
 
+Processes whose function differs (another end time closed over) must all refuse the
+sweep, with exit status 2 and the reason; a coordinator port that is already taken must
+end process 0 with exit status 2 and one line on stderr (not a crash of jax's service).
+
 A killed worker and a hung one must end their peers with an error within a time limit:
 the killed one through `jax.distributed`'s heartbeat, the hung one through the worker's
 watchdog. All groups start at once (the hung group mostly waits), and every process
@@ -43,6 +47,8 @@ AFTER_KILL = 45.0
 HANG_WATCHDOG = 15.0
 #: The success scenarios: name -> (processes, CPU devices each, rows).
 SCENARIOS = {"2x2": (2, 2, 7), "4x1": (4, 1, 8)}  # 2x2: 4 devices, one padding row
+#: The end times [s] of the processes of the scenario whose function differs.
+DIFFERENT_T1 = ("0.1", "0.3")
 
 
 def _free_port() -> int:
@@ -88,7 +94,17 @@ class Group:
             self.ended.setdefault(i, (p.returncode, time.monotonic()))
 
 
-def _start(tmp: Path, name: str, n_proc: int, devices: int, *extra: str, hang: int | None = None) -> Group:
+def _start(
+    tmp: Path,
+    name: str,
+    n_proc: int,
+    devices: int,
+    *extra: str,
+    hang: int | None = None,
+    each: list | None = None,
+) -> Group:
+    """`n_proc` workers with the arguments `extra`, process `hang` hanging, and `each[i]`
+    (if given) appended to process i's arguments."""
     port, group = _free_port(), Group(tmp / name)
     group.out.mkdir(parents=True)
     try:
@@ -96,6 +112,7 @@ def _start(tmp: Path, name: str, n_proc: int, devices: int, *extra: str, hang: i
             cmd = [sys.executable, "-u", str(WORKER), "--coordinator", f"127.0.0.1:{port}"]
             cmd += ["--num-processes", str(n_proc), "--process-id", str(i), "--out", str(group.out), *extra]
             cmd += ["--hang"] if i == hang else []
+            cmd += list(each[i]) if each else []
             group.logs.append(group.out / f"log_{i}.txt")
             with open(group.logs[-1], "w") as f:
                 group.procs.append(
@@ -116,6 +133,8 @@ def _run_all(tmp: Path) -> dict:
             groups[name] = _start(tmp, name, p, d, "--rows", str(n), "--mismatch")
         groups["killed"] = _start(tmp, "killed", 2, 1, "--heartbeat", str(HEARTBEAT), hang=1)
         groups["hung"] = _start(tmp, "hung", 2, 1, "--watchdog", str(HANG_WATCHDOG), hang=1)
+        each = [("--t1", t1) for t1 in DIFFERENT_T1]
+        groups["fn_differs"] = _start(tmp, "fn_differs", 2, 1, "--rows", "2", each=each)
         expected = _single_process([n for _, _, n in SCENARIOS.values()])  # meanwhile
         while time.monotonic() - start < DEADLINE:
             victim = groups["killed"].procs[1]
@@ -201,3 +220,29 @@ def test_a_hung_worker_ends_by_the_watchdog(runs):
         assert f"process {i} has no result after {HANG_WATCHDOG:g} s" in log
     assert "process 0 of 2" in group.log(0)  # it got as far as the sweep
     assert not (group.out / "result.npz").exists()
+
+
+def test_a_function_that_differs_between_processes_is_refused_on_each(runs):
+    group = runs["groups"]["fn_differs"]
+    for i in range(2):
+        status, _ = group.ended[i]
+        log = group.log(i)
+        assert status == 2, f"process {i}: exit status {status}\n{log[-3000:]}"
+        assert f"process {i}: fn differs between processes (program fingerprints [" in log, log[-3000:]
+        assert "pass every process the same function" in log
+    assert not (group.out / "result.npz").exists()
+    for name in SCENARIOS:  # the same function on every process still sweeps
+        assert {status for status, _ in runs["groups"][name].ended.values()} == {0}
+
+
+def test_a_taken_coordinator_port_is_one_line_and_exit_2(tmp_path):
+    with socket.socket() as squatter:
+        squatter.bind(("127.0.0.1", 0))
+        squatter.listen()
+        address = f"127.0.0.1:{squatter.getsockname()[1]}"
+        cmd = [sys.executable, str(WORKER), "--coordinator", address, "--num-processes", "2"]
+        cmd += ["--process-id", "0", "--out", str(tmp_path)]
+        done = subprocess.run(cmd, env=_env(1), capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2, done.stderr[-3000:]
+    (line,) = done.stderr.splitlines()
+    assert address in line and "choose another port" in line, line

@@ -6,17 +6,26 @@ runs on one CPU, one GPU, several local devices (e.g. `XLA_FLAGS=
 --xla_force_host_platform_device_count=2`, one CPU device per core) and, after
 `jax.distributed.initialize()`, on the devices of several processes or hosts.
 
-Several processes: every process calls `sweep` with the same arguments (one
-fingerprint per process is compared first; a mismatch is a ValueError). Each process
+Several processes: every process calls `sweep` with the same function and the same
+arguments. Before anything runs, the processes compare two fingerprints each (one
+small all-gather): a CRC-32 of the arguments' shapes, dtypes and bytes, and a CRC-32 of
+the program that `sweep` lowered from the function (its StableHLO text, which has no
+source locations or addresses, so it is the same on every process that traces the same
+function; the values the function closes over are constants in it; host callbacks
+appear by position only). Either mismatch is an `InputError` on every process, and
+nothing runs (a new program is not even compiled). The program's fingerprint is computed only when the mesh
+spans several processes, once per compiled program (cached with it). Each process
 places only its own devices' rows, from its own copy (`jax.make_array_from_callback`,
 no inputs cross between processes); the padded batch is split into contiguous blocks
 in the order of `devices` (process 0's devices first, by default), so each row is
-computed by one device only (the padding rows repeat the last one). The result is gathered to every process (`multihost_utils.process_allgather`, through
-the backend's collectives: on CPUs set `jax_cpu_collectives_implementation` to "gloo"
-before `jax.distributed.initialize`) and returned as NumPy arrays. With `devices` from
-one process only (e.g. `jax.local_devices()`) each process sweeps on its own and nothing
-is gathered. `tests/distributed_worker.py` is a complete example; a process that dies
-ends the others through `jax.distributed`'s heartbeat (`heartbeat_timeout_seconds`).
+computed by one device only (the padding rows repeat the last one). The result is
+gathered to every process (`multihost_utils.process_allgather`, through the backend's
+collectives: on CPUs set `jax_cpu_collectives_implementation` to "gloo" before
+`jax.distributed.initialize`) and returned as NumPy arrays. With `devices` from one
+process only (e.g. `jax.local_devices()`) each process sweeps on its own and nothing is
+gathered or compared. `tests/distributed_worker.py` is a complete example; a process
+that dies ends the others through `jax.distributed`'s heartbeat
+(`heartbeat_timeout_seconds`).
 """
 
 from __future__ import annotations
@@ -36,9 +45,10 @@ from ._simulate import _TRACES
 AXIS = "batch"
 
 #: (fn, in_axes, device ids) -> (the jitted sharded vmapped function, batched and
-#: replicated shardings); and (that key, argument types) -> its compiled executable.
+#: replicated shardings); and (that key, argument types) -> (its compiled executable,
+#: its program fingerprint or None on one process).
 _CACHE: dict[tuple, tuple] = {}
-_EXECUTABLES: dict[tuple, Any] = {}
+_EXECUTABLES: dict[tuple, tuple] = {}
 
 
 def _normalize_axes(in_axes, n_args: int) -> tuple[int | None, ...]:
@@ -98,15 +108,32 @@ def _program(fn: Callable, axes: tuple[int | None, ...], devices: tuple, batch_s
     return _CACHE[key]
 
 
-def _executable(fn, axes, devices, batch_size, placed):
-    """The compiled program for these placed arguments (cached per shapes and dtypes)."""
+def _executable(fn, axes, devices, batch_size, placed, args):
+    """The compiled program for these placed arguments (cached per shapes and dtypes,
+    with its fingerprint), compiled only once the processes agree on it and on `args`
+    (`_check_same`): a mismatch compiles nothing. The fingerprint (`_fingerprint`) is
+    computed only when the processes compare it (`_compared`)."""
     jitted = _program(fn, axes, devices, batch_size)[0]
     leaves, treedef = jax.tree_util.tree_flatten(placed)
     key = (fn, axes, tuple(d.id for d in devices), batch_size, treedef)
     key += tuple(jax.typeof(leaf) for leaf in leaves)
-    if key not in _EXECUTABLES:
-        _EXECUTABLES[key] = jitted.lower(*placed).compile()
-    return _EXECUTABLES[key]
+    if key in _EXECUTABLES:
+        compiled, program = _EXECUTABLES[key]
+        _check_same(args, program)
+        return compiled
+    lowered = jitted.lower(*placed)
+    program = _fingerprint(lowered) if _compared(devices) else None
+    _check_same(args, program)
+    _EXECUTABLES[key] = (lowered.compile(), program)
+    return _EXECUTABLES[key][0]
+
+
+def _fingerprint(lowered) -> int:
+    """CRC-32 of a lowered program's StableHLO text. Without debug info the text holds no
+    source locations, memory addresses or process index (host callbacks are numbered), so
+    processes that trace the same function get the same number; a constant the function
+    closes over (e.g. an end time) is part of the text."""
+    return zlib.crc32(lowered.as_text(debug_info=False).encode())
 
 
 def _batch_size(args, axes) -> int:
@@ -157,8 +184,8 @@ def _place(leaf, sharding, n_pad: int | None):
 
     A sharding that spans several processes gets each process's own shards from its
     host copy (`jax.make_array_from_callback`: no data crosses between processes;
-    `_check_same` made sure that every process holds the same batch). Python scalars
-    and arrays that already span processes go through `jax.device_put`.
+    `_check_same` refuses, before anything runs, a batch that differs between them).
+    Python scalars and arrays that already span processes go through `jax.device_put`.
     """
     host_array = isinstance(leaf, np.ndarray) or (isinstance(leaf, jax.Array) and leaf.is_fully_addressable)
     if sharding.is_fully_addressable or not host_array:
@@ -177,24 +204,47 @@ def _place_all(args, axes, batched, replicated, n_pad: int) -> tuple:
     )
 
 
-def _check_same(args, mesh_devices) -> None:
-    """Every process must pass the same batch (each computes its rows from its own copy):
-    one fingerprint per process, compared across the processes of the mesh."""
-    if len({d.process_index for d in mesh_devices}) < max(2, jax.process_count()):
-        return  # one process, or not every process takes part
-    from jax.experimental import multihost_utils
+def _compared(devices) -> bool:
+    """Whether the processes compare fingerprints: the mesh spans several processes and
+    every process takes part (each must join the all-gather)."""
+    return len({d.process_index for d in devices}) >= max(2, jax.process_count())
 
+
+def _args_fingerprint(args) -> int:
+    """CRC-32 of the host arguments' shapes, dtypes and bytes (arrays that already span
+    processes are skipped: nothing to compare)."""
     crc = 0
     for leaf in jax.tree_util.tree_leaves(args):
         if isinstance(leaf, jax.Array) and not leaf.is_fully_addressable:
-            continue  # already global: nothing to compare
+            continue
         host = np.ascontiguousarray(leaf)
         crc = zlib.crc32(f"{host.shape}{host.dtype}".encode() + host.tobytes(), crc)
-    every = np.asarray(multihost_utils.process_allgather(np.array([crc], np.uint32))).ravel()
-    if len(set(every.tolist())) > 1:
+    return crc
+
+
+def _check_same(args, program: int | None) -> None:
+    """Every process must pass the same batch (each computes its rows from its own copy)
+    to the same function (each runs its own compiled program): one fingerprint of each
+    per process, compared across the processes (`program`: the program's fingerprint,
+    None when nothing is compared)."""
+    if program is None:
+        return
+    from jax.experimental import multihost_utils
+
+    mine = np.array([_args_fingerprint(args), program], np.uint32)
+    every = np.asarray(multihost_utils.process_allgather(mine)).reshape(-1, 2)
+    if len(set(every[:, 0].tolist())) > 1:
         raise InputError(
-            f"args differ between processes (fingerprints {every.tolist()}, one per process); "
+            f"args differ between processes (fingerprints {every[:, 0].tolist()}, one per process); "
             "every process must call sweep with the same arguments, in the same order"
+        )
+    if len(set(every[:, 1].tolist())) > 1:
+        prints = [f"{v:08x}" for v in every[:, 1].tolist()]
+        raise InputError(
+            f"fn differs between processes (program fingerprints {prints}, one per process): "
+            "each process would compute its rows with its own function; pass every process "
+            "the same function, closing over the same values (e.g. the same end time t1), "
+            "built from the same settings on each"
         )
 
 
@@ -220,7 +270,8 @@ def sweep(
       or one entry per argument. Default 0.
     - `devices`: the devices to shard over. Default: all of `jax.devices()` (every
       process's devices after `jax.distributed.initialize()`; then every process must
-      call `sweep` with the same arguments, and each gets the whole result).
+      call `sweep` with the same function and arguments, else an `InputError` on every
+      process, and each gets the whole result).
     - `batch_size`: `None` vmaps all of a device's rows at once; an integer runs them
       in chunks of that many vmapped rows (`lax.map`), which bounds memory for large
       batches (a vmapped while loop holds every row's buffers). `1` runs the rows one
@@ -254,9 +305,8 @@ def _prepare(fn, args, in_axes, devices, batch_size):
     n = _batch_size(args, axes)
     n_pad = -n % len(devices)
     _, batched, replicated = _program(fn, axes, devices, batch_size)
-    _check_same(args, devices)
-    placed = _place_all(args, axes, batched, replicated, n_pad)
-    return _executable(fn, axes, devices, batch_size, placed), placed, n, n_pad
+    placed = _place_all(args, axes, batched, replicated, n_pad)  # local: nothing runs yet
+    return _executable(fn, axes, devices, batch_size, placed, args), placed, n, n_pad
 
 
 def sweep_compiled(fn: Callable[..., Any], *args: Any, in_axes=0, devices=None, batch_size=None):
