@@ -38,8 +38,10 @@ def _source_kind(sources, kind: str, *, source_help: str, x0_help: str, noise_he
         p.add_argument(
             "--force",
             action="store_true",
-            help="write the data file even when the onsets are not those of one bouncing ball (intervals "
-            "that do not decay, a broken ratio chain); by default such an import is refused with exit 3",
+            help="write the data file even when the onsets are not those of one ball's drop test (intervals "
+            "that do not decay, a broken ratio chain, a chain kept from a minority of the onsets, a flight longer "
+            "than the ball allows, an estimated release higher than any drop test's); by default such an import is "
+            "refused with exit 3",
         )
     p.set_defaults(func=_run_import)
     return p
@@ -163,20 +165,23 @@ def _plot_import(result, args) -> None:
 
 
 def _refused(err, args) -> int:
-    """Report an import whose onsets are not a bouncing ball's: the import's summary, the
-    reasons, the figure if asked for; nothing written; exit 3."""
+    """Report an import whose onsets are not a bouncing ball's: the import's summary and the
+    figure if asked for (stdout), the reasons in one line on stderr; nothing written; exit 3."""
+    import dataclasses
+    import sys
+
     from jaxunilat.internal import PROG, output_errors
 
     if err.result is not None:
-        print(err.result.summary())
+        print(dataclasses.replace(err.result, problems=()).summary())
         if args.plot is not None:
             with output_errors():
                 _plot_import(err.result, args)
-    for problem in err.problems:
-        print(f"{PROG}: not a bouncing ball: {problem}")
+    reasons = " ".join("; ".join(err.problems).split())
     print(
-        f"{PROG}: nothing written to {args.out}; check the recording (--plot shows it), or pass --force "
-        f"to write it anyway: exit status {EXIT_NOT_A_BALL}"
+        f"{PROG}: not one bouncing ball: {reasons}; nothing written to {args.out} (--plot shows the import, "
+        f"--force writes it anyway): exit status {EXIT_NOT_A_BALL}",
+        file=sys.stderr,
     )
     return EXIT_NOT_A_BALL
 

@@ -30,8 +30,11 @@ Keys: `scene` (`drop`: one surface at x = 0, x the height of the ball's lowest p
 contact onset times; `apex`: column h, the rebound apex heights, and optionally t),
 `mass` (kg, > 0), `drag` (s/m, ≥ 0; 0 = no drag), `x0` (m), `v0` (m/s), `gap` (m, > 0;
 rackets only), `noise` (optional, > 0: the measurement standard deviation, m for trace
-and apex, s for impacts), `gravity` (optional, m/s², > 0, default 9.81), `source`
-(optional free text).
+and apex, s for impacts), `gravity` (optional, m/s², > 0, default 9.81), `estimated`
+and `measured` (optional, comma-separated names from `x0`, `v0`, `scale`, `level`,
+no spaces: which of the release state and, for traces, the length scale and contact
+level were estimated rather than measured, or measured; a fit frees what was
+estimated and holds what was measured), `source` (optional free text).
 
 Parsing is plain text: nothing is executed, evaluated or unpickled; numbers are
 matched by a decimal-literal pattern and converted with `float`.
@@ -55,7 +58,13 @@ OBSERVES = ("trace", "impacts", "apex")
 #: Keys that must be present (plus `gap` for rackets).
 REQUIRED_KEYS = ("scene", "mass", "drag", "x0", "v0", "observe")
 #: Every allowed metadata key, in the order `write_dataset` writes them.
-KEYS = ("scene", "observe", "mass", "drag", "x0", "v0", "gap", "noise", "gravity", "source")
+KEYS = (
+    "scene", "observe", "mass", "drag", "x0", "v0", "gap", "noise", "gravity", "estimated", "measured", "source",
+)  # fmt: skip
+#: The names `estimated` and `measured` may list: the release state, and a trace's length
+#: scale and contact level (the fit's nuisance parameters `scale` and `level`).
+PROVENANCE_NAMES = ("x0", "v0", "scale", "level")
+_LIST_KEYS = ("estimated", "measured")
 DEFAULT_GRAVITY = 9.81
 #: Columns per observation: (required, optional).
 COLUMNS = {"trace": (("t", "x"), ()), "impacts": (("t",), ()), "apex": (("h",), ("t",))}
@@ -98,6 +107,9 @@ class Dataset:
       apex times (s). Strictly increasing.
     - `x`: trace: positions, m.
     - `h`: apex: rebound apex heights, m, > 0 (the release height x0 is not one).
+    - `estimated`, `measured`: names from `PROVENANCE_NAMES` (`x0`, `v0`, and for traces
+      `scale`, `level`) that the recording's importer estimated, or that were measured;
+      a fit frees the estimated ones and holds the measured ones. Default: neither.
     - `source`: free-text provenance, or `None`.
     - `path`: the file it was read from, or `None`.
 
@@ -117,10 +129,20 @@ class Dataset:
     t: np.ndarray | None = None
     x: np.ndarray | None = None
     h: np.ndarray | None = None
+    estimated: tuple[str, ...] = ()
+    measured: tuple[str, ...] = ()
     source: str | None = None
     path: str | None = None
 
     def __post_init__(self):
+        for name in _LIST_KEYS:
+            value = getattr(self, name)
+            if isinstance(value, str):
+                value = tuple(v for v in value.split(",") if v)
+            try:
+                object.__setattr__(self, name, tuple(value))
+            except TypeError:
+                raise InputError(f"Dataset: {name} = {value!r} is not a list of names") from None
         for name in ("t", "x", "h"):
             value = getattr(self, name)
             if value is not None:
@@ -236,6 +258,7 @@ def _validate(ds: Dataset, where: _Where) -> None:
             f"{where('x0')} = {ds.x0:g} is out of range; valid range is [{-ds.gap / 2:g}, {ds.gap / 2:g}] m "
             f"(between the walls at ±gap/2, gap = {ds.gap:g} m)"
         )
+    _validate_provenance(ds, where)
     if ds.source is not None and (not isinstance(ds.source, str) or "\n" in ds.source or "\r" in ds.source):
         raise InputError(f"{where('source')} = {ds.source!r} must be one line of text")
     required, optional = COLUMNS[ds.observe]
@@ -290,6 +313,28 @@ def _validate(ds: Dataset, where: _Where) -> None:
                 f"{where('h', i)} = {float(ds.h[i])!r} is out of range; valid range is (0, inf) m "
                 "(rebound apex heights above the surface)"
             )
+
+
+def _validate_provenance(ds: Dataset, where: _Where) -> None:
+    """`estimated` and `measured`: known names, none twice, none in both, scale and level
+    for traces only."""
+    for key in _LIST_KEYS:
+        names = getattr(ds, key)
+        for n in names:
+            if n not in PROVENANCE_NAMES:
+                raise InputError(
+                    f"{where(key)} = {','.join(map(str, names))}: {n!r} is not one of "
+                    f"{', '.join(PROVENANCE_NAMES)} (comma-separated, no spaces)"
+                )
+            if names.count(n) > 1:
+                raise InputError(f"{where(key)}: {n!r} appears twice")
+            if n in ("scale", "level") and ds.observe != "trace":
+                raise InputError(
+                    f"{where(key)}: {n!r} applies to traces only (observe = trace), not observe = {ds.observe}"
+                )
+    both = sorted(set(ds.estimated) & set(ds.measured))
+    if both:
+        raise InputError(f"{where('measured')}: {', '.join(both)} cannot be both estimated and measured")
 
 
 # -- reading -----------------------------------------------------------------------------
@@ -442,6 +487,8 @@ def _parse(text: str, name: str) -> Dataset:
         if key in meta:
             fields[key] = _number(meta[key], where(key), unit)
     fields.setdefault("gravity", DEFAULT_GRAVITY)
+    for key in _LIST_KEYS:
+        fields[key] = tuple(meta[key].split(",")) if key in meta else ()
 
     # The column header and the rows.
     if i >= len(lines):
@@ -540,7 +587,10 @@ def format_dataset(dataset: Dataset) -> str:
     out = [_FIRST_LINE]
     for key in KEYS:
         value = getattr(dataset, key)
-        if value is None or (key == "gravity" and value == DEFAULT_GRAVITY):
+        if value is None or value == () or (key == "gravity" and value == DEFAULT_GRAVITY):
+            continue
+        if key in _LIST_KEYS:
+            out.append(f"# {key} = {','.join(value)}")
             continue
         out.append(f"# {key} = {value if key in ('scene', 'observe', 'source') else _format_number(value)}")
     columns = dataset.columns

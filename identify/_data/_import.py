@@ -172,11 +172,14 @@ def source_text(path: str, importer: str) -> str:
 
 
 def impacts_dataset(
-    times: np.ndarray, *, source: str, importer: str, mass, drag, x0, v0, noise
+    times: np.ndarray, *, source: str, importer: str, mass, drag, x0, v0, noise, x0_derived: bool = False
 ) -> tuple[Dataset, list[str]]:
     """An `observe = impacts` drop data set with the importers' defaults, and the notes.
 
-    `times` are the onsets (s, recording clock, strictly increasing, at least 2).
+    `times` are the onsets (s, recording clock, strictly increasing, at least 2). An x0
+    that is None is estimated from the first interval; both it and an x0 the caller
+    derived (`x0_derived`: e.g. the apex before a late export's first bounce) are
+    written as estimated, so that a fit frees them.
     """
     times = np.asarray(times, dtype=float)
     notes = []
@@ -184,6 +187,7 @@ def impacts_dataset(
         raise InputError(
             f"{source}: {len(times)} impact onset(s) kept; a data set of impacts needs at least 2"
         )
+    estimated = ("x0",) if x0 is None or x0_derived else ()
     if x0 is None:
         first = float(times[1] - times[0])
         e, why = ASSUMED_RESTITUTION, "assuming"
@@ -210,6 +214,7 @@ def impacts_dataset(
         v0=v0,
         noise=noise,
         t=times,
+        estimated=estimated,
     )
     return ds, notes
 
@@ -448,10 +453,114 @@ def bounce_problems(times) -> list[str]:
     return problems
 
 
-def gate(result: ImportResult, *, force: bool) -> ImportResult:
-    """Return `result` if its onsets are a bouncing ball's (`bounce_problems`); otherwise
-    raise `ImplausibleRecording`, or with `force` return it with `problems` filled in."""
-    problems = tuple(bounce_problems(result.dataset.t))
+#: The highest release of a drop test, m: twice the ITF tennis-ball rebound test's 2.54 m
+#: (FIFA's football test drops from 2 m, FIBA's basketball test from 1.8 m, ITTF's from
+#: 0.305 m), room for a release from a stand, a stairwell or a first-floor window, and for
+#: the error of the drag-free estimate. A release height estimated above it
+#: (`import_problems`) is no drop test; a measured `--x0` is taken as stated.
+MAX_DROP_HEIGHT = 5.0
+
+
+def flight_time(speed: float, drag: float, *, gravity: float = DEFAULT_GRAVITY) -> float:
+    """Floor-to-floor flight time, s, of a take-off at `speed` (m/s) under gravity and
+    quadratic drag `drag` (k = 1/terminal speed, s/m; 0: none).
+
+    With ẍ = −g − g k² v|v| (`jaxunilat`'s flight model) the rise lasts atan(k u)/(g k) to
+    an apex ln(1 + (k u)²)/(2 g k²); the fall from rest through it ends when
+    cosh(g k τ) = exp(g k² apex) = sqrt(1 + (k u)²), so
+    T(u) = (atan(k u) + asinh(k u)) / (g k), increasing in u (2u/g without drag)."""
+    b = drag * speed
+    if b < 1e-9:
+        return 2.0 * speed / gravity
+    return (math.atan(b) + math.asinh(b)) / (gravity * drag)
+
+
+def longest_flight(
+    drag: float, *, v0: float = 0.0, height: float = MAX_DROP_HEIGHT, gravity: float = DEFAULT_GRAVITY
+) -> tuple[float, str]:
+    """The longest flight between two bounces, s, of a ball with quadratic drag `drag`
+    (s/m) released at `v0` (m/s) from at most `height` (m), and how it follows, in words.
+
+    A bounce never takes off faster than the ball landed (e ≤ 1), and the ball never lands
+    faster than sqrt(v0² + 2 g height) (energy: drag only takes some away) nor, with drag,
+    faster than max(|v0|, 1/k) (falling, v̇ = g (1 − k² v²) draws the speed towards 1/k
+    and never past it). The flight of the fastest take-off u (`flight_time`, increasing in
+    u) bounds every flight; the ball's mass enters only through k. With the default ball
+    (k = 0.12 s/m) it is 1.416 s, the terminal speed's limit (π/4 + asinh 1)/(g k), which a
+    ball would reach only after an endless fall."""
+    speed = math.sqrt(v0 * v0 + 2.0 * gravity * height)
+    why = f"it lands no faster than from {height:g} m, sqrt(v0^2 + 2 g h) = {speed:.3g} m/s"
+    if drag > 0 and max(abs(v0), 1.0 / drag) < speed:
+        speed = max(abs(v0), 1.0 / drag)
+        why = (
+            f"it lands no faster than its terminal speed 1/k = {speed:.3g} m/s"
+            if abs(v0) <= 1.0 / drag
+            else f"it lands no faster than |v0| = {speed:.3g} m/s (above its terminal speed)"
+        )
+    bound = flight_time(speed, drag, gravity=gravity)
+    how = (
+        f"at most {bound:.4g} s with drag k = {drag:g} s/m and g = {gravity:g} m/s^2: a bounce takes off no "
+        f"faster than the ball landed, {why}, and a take-off at u flies "
+        + ("(atan(k u) + asinh(k u)) / (g k)" if drag > 0 else "2 u / g")
+    )
+    return bound, how
+
+
+def import_problems(result: ImportResult, *, x0_estimated: bool) -> list[str]:
+    """Why an impacts import is no drop test of one ball, beyond `bounce_problems`; [] if none.
+
+    - The chain kept is a minority of the candidate onsets (distinct times, kept and left
+      out): most of what was heard or listed is something else (clicks at random, speech,
+      rows out of order), and a chain of a few of them is chance.
+    - An interval longer than the ball can fly (`longest_flight` with the import's drag,
+      v0 and gravity, from at most the larger of `MAX_DROP_HEIGHT` and a stated x0; an
+      interval the ratio chain reads as m flights, missed bounces, may last m times that).
+    - With `x0_estimated`, a release height estimated above `MAX_DROP_HEIGHT`.
+    """
+    ds = result.dataset
+    t = np.asarray(ds.t, dtype=float)
+    if ds.observe != "impacts" or len(t) < 2 or np.any(np.diff(t) <= 0):
+        return []
+    problems = []
+    every = [float(x) for x in result.accepted] + [r.time for r in result.rejected]
+    candidates = len(np.unique([x for x in every if math.isfinite(x)]))
+    what = "candidate clicks" if result.importer == "wav" else "event times"
+    if 2 * len(t) < candidates:
+        problems.append(
+            f"only {len(t)} of the {candidates} {what} are kept as the bouncing ball's: the ball's "
+            "bounces would be a minority of the recording, so its chain is chance among other sounds "
+            "(clicks at random, speech, rows out of order?)"
+        )
+    interval = np.diff(t)
+    spans = ratio_chain(t).spans if len(t) >= 3 else np.ones(len(interval), dtype=int)
+    height = MAX_DROP_HEIGHT if x0_estimated else max(ds.x0, MAX_DROP_HEIGHT)
+    bound, how = longest_flight(ds.drag, v0=ds.v0, height=height, gravity=ds.gravity)
+    over = np.flatnonzero(interval > spans * bound)
+    if len(over):
+        k = int(over[np.argmax(interval[over] / spans[over])])
+        flights = f" ({spans[k]} flights, {spans[k] * bound:.4g} s at most)" if spans[k] > 1 else ""
+        n = len(over) - 1
+        more = f" (and {n} more interval{'s' if n > 1 else ''})" if n else ""
+        problems.append(
+            f"the interval {interval[k]:.6g} s (onset {k + 1} -> {k + 2}, ending at t = {t[k + 1]:.6g} s){flights} "
+            f"is longer than any flight of this ball{more}: {how} (another sound, or times not in seconds?)"
+        )
+    if x0_estimated and ds.x0 > MAX_DROP_HEIGHT:
+        problems.append(
+            f"the first interval {interval[0]:.6g} s implies a release from x0 = {ds.x0:.4g} m "
+            "(g T1^2 / (8 e^2), drag-free), "
+            f"above the {MAX_DROP_HEIGHT:g} m a drop test uses at most; pass the measured --x0 if it was one"
+        )
+    return problems
+
+
+def gate(result: ImportResult, *, force: bool, x0_estimated: bool = False, more=()) -> ImportResult:
+    """Return `result` if its onsets are a drop test of one bouncing ball (`bounce_problems`,
+    the importer's own `more` problems, `import_problems`: `x0_estimated` says the release
+    height was estimated, not given); otherwise raise `ImplausibleRecording`, or with
+    `force` return it with `problems` filled in."""
+    problems = tuple(bounce_problems(result.dataset.t)) + tuple(more)
+    problems += tuple(import_problems(result, x0_estimated=x0_estimated))
     if not problems:
         return result
     result = dataclasses.replace(result, problems=problems)

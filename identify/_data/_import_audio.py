@@ -43,7 +43,6 @@ from ._format import read_bytes
 from ._import import (
     MAX_SPAN,
     RESTITUTION_RANGE,
-    ImplausibleRecording,
     ImportResult,
     Rejected,
     check_options,
@@ -887,20 +886,7 @@ def import_wav(
         info=info,
         detection=det,
     )
-    result = gate(result, force=force)
-    extra = tuple(second_sequence(det))
-    if not extra:
-        return result
-    result = dataclasses.replace(result, problems=result.problems + extra)
-    if force:
-        return result
-    raise ImplausibleRecording(
-        f"{name}: the onsets are not those of one bouncing ball: "
-        + "; ".join(extra)
-        + " (nothing written; look at it with --plot, or keep it anyway with --force)",
-        extra,
-        result,
-    )
+    return gate(result, force=force, x0_estimated=x0 is None, more=second_sequence(det))
 
 
 #: A second chain of at least this many left-out clicks, this loud (× the kept clicks'

@@ -498,11 +498,13 @@ def import_phyphox(
     if fit is not None:
         estimate = fit.scatter / math.sqrt(2.0)
         method = "robust scatter of the intervals about a smooth fit, /sqrt(2); not written as noise"
+    given = x0
     if x0 is not None and not v0:
         x0 = _late_start(times_a, x0, drag, notes, warnings)
     ds, more = impacts_dataset(
-        times_a, source=name, importer="phyphox", mass=mass, drag=drag, x0=x0, v0=v0, noise=noise
-    )
+        times_a, source=name, importer="phyphox", mass=mass, drag=drag, x0=x0, v0=v0, noise=noise,
+        x0_derived=x0 != given,
+    )  # fmt: skip
     notes += more
     _noise_note(noise, notes)
     result = _table_result(
@@ -517,7 +519,7 @@ def import_phyphox(
         noise_estimate=estimate,
         noise_method=method or "",
     )
-    return gate(result, force=force)
+    return gate(result, force=force, x0_estimated=x0 is None)
 
 
 def _phyphox_events(
