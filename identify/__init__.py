@@ -27,6 +27,15 @@ from ._apply._qualify import (  # noqa: E402
     qualify_fit as qualify_fit,
     rebound_height as rebound_height,
 )
+from ._data._balls import (  # noqa: E402
+    AIR_DENSITY as AIR_DENSITY,
+    BALLS as BALLS,
+    SPHERE_DRAG_COEFFICIENT as SPHERE_DRAG_COEFFICIENT,
+    BallPreset as BallPreset,
+    BallSpec as BallSpec,
+    ball_spec as ball_spec,
+    sphere_drag as sphere_drag,
+)
 from ._data._format import (  # noqa: E402
     Dataset as Dataset,
     load_dataset as load_dataset,

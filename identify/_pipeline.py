@@ -48,12 +48,12 @@ from ._fit._options import (
     shift_offset_arguments,
 )
 from ._fit._problem import LAWS, PARAMETERS
-from ._fit._profile import check_profile_minimum, profile_kappa
+from ._fit._profile import check_profile_minimum, profile_closes, profile_kappa
 from ._fit._restitution import hunt_crossley_from_restitution
 from ._fit._robust import THRESHOLD, Rows
 from ._fit._setup import build, point_at, start_points
 from ._report._result import FitResult
-from ._report._summary import summarize_fit
+from ._report._summary import CONTACT, summarize_fit
 
 __all__ = ["METHODS", "default_optimizer", "fit"]
 
@@ -88,9 +88,12 @@ def fit(
     - `data`: an `identify.Dataset` or a data file's path, or a list of them: a joint
       fit shares κ, k_r (and the drag, when fitted) and gives each file its own x0, v0
       and offset.
-    - `nuisance`: extra parameters to fit, from `("drag", "x0", "v0", "offset")`;
-      `offset` (the recording's unknown time origin, s) applies to impact onsets and to
-      traces (a video rarely starts at the release), not to apex heights.
+    - `nuisance`: extra parameters to fit, from `("drag", "x0", "v0", "offset", "scale",
+      "level")`; `offset` (the recording's unknown time origin, s) applies to impact onsets
+      and to traces (a video rarely starts at the release), not to apex heights; `scale`
+      and `level` are a trace's length scale and contact level (data = level + scale ·
+      model height), fitted by default for traces unless the file lists them as
+      `measured`, and held at (1, 0) for other data.
     - `freeze`: parameters held at their initial value, e.g. `("k_r",)`.
     - `initial`: starting values in SI units (kappa, k_r in the law's units, drag s/m,
       x0 m, v0 m/s, offset s); default: the closed-form guess and the files' values.
@@ -217,9 +220,16 @@ def _fit_law(setup, opts: Options):
         final, best, rows, opts, runs=runs, initial=initial, robust_scale=scale, onsets=onsets
     )
     _note_restarts(result, setup, restarts)
-    if opts.profile and setup.layout.index[0, 0] in setup.free:
-        result.profile = profile_kappa(final, best, rows, result, opts)
+    confirm = any(result.identifiable[name] for name in CONTACT)
+    if setup.layout.index[0, 0] in setup.free and (opts.profile or confirm):
+        # Asked for, or to confirm an identifiable κ, k_r or t_c: the Gauss–Newton interval
+        # is local and linear (a t_c stuck at the steering prior's centre had ±10%), and a κ
+        # whose profile stays flat on one side is not what the data carry.
+        result.profile = profile_kappa(final, best, rows, result, opts, points=13 if opts.profile else 7)
         check_profile_minimum(result, best, setup)
+        why = profile_closes(result.profile)
+        if why is not None:
+            result.withhold(CONTACT, why)
     result.wall_s = time.perf_counter() - began
     finish = None
     if opts.defer_alone and setup.layout.n_files > 1:

@@ -29,7 +29,7 @@ def test_noise_gated_recording_keeps_its_quiet_bounces_and_says_so(seed, tmp_pat
     assert any("digital silence" in n for n in det.floor_notes)
     path = tmp_path / "gated.wav"
     _write(path, x, rec.rate)
-    result = import_wav(path, force=True)
+    result = import_wav(path, force=True, ball="pingpong")
     assert any("digital silence" in n for n in result.notes)
 
 
@@ -53,12 +53,12 @@ def test_several_drops_refused_with_their_restart_times(name, tmp_path):
     path = tmp_path / "drops.wav"
     _write(path, rec.samples, rec.rate)
     with pytest.raises(ImplausibleRecording) as err:
-        import_wav(path)
+        import_wav(path, ball="pingpong")
     message = str(err.value)
     assert "several drops" in message
     for first, *_ in drops:
         assert f"{first:.3f}" in message.split("start at t = ")[1], (first, message)
-    forced = import_wav(path, force=True)
+    forced = import_wav(path, force=True, ball="pingpong")
     assert forced.problems
 
 

@@ -55,7 +55,8 @@ def test_absurd_table_values_are_one_line_naming_file_line_column(tmp_path, caps
     src.write_text(text)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no RuntimeWarning spill either
-        code, out, err = _run(["import", kind, str(src), "--out", str(tmp_path / "o.csv")], capsys)
+        argv = ["import", kind, str(src), "--ball", "pingpong", "--out", str(tmp_path / "o.csv")]
+        code, out, err = _run(argv, capsys)
     assert code == 2
     line = _one_error_line(err)
     assert f"{kind}.csv" in line and "out of range" in line and "valid range" in line
@@ -210,7 +211,9 @@ def test_event_mode_with_a_smooth_switch_names_the_flags(capsys):
 def test_wav_threshold_below_the_default_onset_floor_works(tmp_path, capsys):
     # Before: "noise_level = 5 is out of range; valid range is (0, 3]" (an option the CLI lacks).
     out_csv = tmp_path / "o.csv"
-    code, out, err = _run(["import", "wav", WAV, "--out", str(out_csv), "--threshold", "3"], capsys)
+    code, out, err = _run(
+        ["import", "wav", WAV, "--ball", "pingpong", "--out", str(out_csv), "--threshold", "3"], capsys
+    )
     assert code == 0, err
     assert out_csv.exists() and "noise_level" not in err
 

@@ -159,7 +159,9 @@ def test_holdout_predicts_the_rest_of_a_trace_within_the_noise():
     h = result.to_json_dict()["holdout"]
     assert h["fraction"] == 0.2 and h["rows"] == 300
     assert h["within_noise"] is True and h["rms"] < 1e-3 and h["max"] < 3e-3
-    assert result.datasets[0]["used"] == t.size - 300
+    # A 4.2-sigma noise sample (row 1102) may go to the robust pass: counted apart.
+    entry = result.datasets[0]
+    assert entry["used"] == t.size - 300 - len(entry["outliers"]) and len(entry["outliers"]) <= 1
 
 
 def test_trace_with_unknown_time_origin():
@@ -233,7 +235,7 @@ def test_forward_mode_gradient_stage_matches_central_differences(kv_drops):
     problem = dataclasses.replace(group.problem, autodiff="forward")
     w = jnp.asarray(row_weights(setup, rows)[None, :])
     index = jnp.asarray(setup.layout.index[group.files])
-    mask = jnp.asarray([True, True, False, False, False, True])
+    mask = jnp.asarray(np.isin(np.arange(z.size), setup.free))  # kappa, k_r, offset
     z_new, _, value = step([problem], [index], [w], jnp.asarray(z), sgd.init(jnp.asarray(z)), mask)
     gradient = z - np.asarray(z_new)
 

@@ -197,7 +197,7 @@ def test_onsets_found_and_spurious_rejected(tmp_path, label, fi, noise, hum, fir
     x = render(rate, onsets, amplitudes, freq=freq, noise=noise, hum=hum, extra=extra, seed=fi)
     path = tmp_path / f"{label}.wav"
     _write(path, x, rate, bits, encoding, channels, extensible, writer)
-    result = import_wav(path)
+    result = import_wav(path, ball="pingpong")
     found = result.accepted
     assert len(found) == len(onsets), (found, result.summary())
     assert np.max(np.abs(found - onsets)) <= TOL, np.abs(found - onsets) * 1e6
@@ -290,7 +290,7 @@ def test_bundled_wav_against_truth(tmp_path):
     assert len(clicks) >= 30
     path = os.path.join(DATA, "phone_drop.wav")
     assert os.path.getsize(path) <= 1_000_000
-    result = import_wav(path)
+    result = import_wav(path, ball="pingpong")
     found = result.accepted
     assert len(found) == len(clicks), result.summary()
     assert np.max(np.abs(found - clicks)) <= TOL
@@ -304,7 +304,10 @@ def test_bundled_wav_against_truth(tmp_path):
     result.write(out)
     ds = load_dataset(out)
     assert ds.observe == "impacts" and ds.scene == "drop" and np.array_equal(ds.t, found)
-    assert ds.noise == result.noise_estimate and ds.source == "phone_drop.wav (jaxunilat import wav)"
+    assert (
+        ds.noise == result.noise_estimate
+        and ds.source == "phone_drop.wav (jaxunilat import wav, ball: pingpong)"
+    )
     text = out.read_text()
     assert "## left out: t = " in text and "spurious" in text and "## x0 = " in text
 
@@ -349,7 +352,7 @@ def test_phyphox_variants_load_the_same_times(tmp_path, label, text):
     path = tmp_path / f"{label}.csv"
     path.write_text(text, encoding="utf-8", newline="")
     before = path.read_bytes()
-    result = import_phyphox(path)
+    result = import_phyphox(path, ball="pingpong")
     np.testing.assert_allclose(result.dataset.t, TIMES, rtol=0, atol=1e-9)
     assert path.read_bytes() == before
     assert result.dataset.noise is None  # a fit estimates it
@@ -361,22 +364,26 @@ def test_phyphox_variants_load_the_same_times(tmp_path, label, text):
 def test_phyphox_intervals_only_and_one_row_exports(tmp_path):
     intervals = np.diff(TIMES)
     (tmp_path / "iv.csv").write_text('"Interval (s)"\n\n' + "\n".join(f"{v:.6f}" for v in intervals) + "\n")
-    got = import_phyphox(tmp_path / "iv.csv").dataset.t
+    got = import_phyphox(tmp_path / "iv.csv", ball="pingpong").dataset.t
     np.testing.assert_allclose(got, TIMES - TIMES[0], atol=1e-9)  # the clock offset is unknown
     (tmp_path / "iv2.csv").write_text('"Interval (s)"\n' + "\n".join(f"{v:.6f}" for v in intervals) + "\n")
-    np.testing.assert_allclose(import_phyphox(tmp_path / "iv2.csv").dataset.t, TIMES - TIMES[0], atol=1e-9)
+    np.testing.assert_allclose(
+        import_phyphox(tmp_path / "iv2.csv", ball="pingpong").dataset.t, TIMES - TIMES[0], atol=1e-9
+    )
     # The app's one-row "Multiple" and "(In)elastic collision" exports.
     heads = ['"Start (s)"'] + [f'"Stop {k} (s)"' for k in range(1, 6)]
     (tmp_path / "stop.csv").write_text(
         ",".join(heads) + "\n" + ",".join(f"{t:.6f}" for t in TIMES[:6]) + "\n"
     )
-    np.testing.assert_allclose(import_phyphox(tmp_path / "stop.csv").dataset.t, TIMES[:6], atol=1e-9)
+    np.testing.assert_allclose(
+        import_phyphox(tmp_path / "stop.csv", ball="pingpong").dataset.t, TIMES[:6], atol=1e-9
+    )
     heads, cells = [], []
     for k in range(6):
         heads += [f'"Bounce {k} (s)"', f'"Height {k} (m)"']
         cells += [f"{TIMES[k]:.6f}" if k < 5 else "0", "0.2"]
     (tmp_path / "bounce.csv").write_text(";".join(heads) + "\n" + ";".join(cells) + "\n")
-    result = import_phyphox(tmp_path / "bounce.csv")
+    result = import_phyphox(tmp_path / "bounce.csv", ball="pingpong")
     np.testing.assert_allclose(result.dataset.t, TIMES[:5], atol=1e-9)
     assert "not triggered" in result.rejected[0].reason  # the sixth bounce never came
 
@@ -393,7 +400,7 @@ def test_phyphox_xlsx(tmp_path):
     for i, t in enumerate(TIMES):
         sheet.append([float(t), None if i == 0 else float(TIMES[i] - TIMES[i - 1])])
     book.save(tmp_path / "export.xlsx")
-    result = import_phyphox(tmp_path / "export.xlsx")
+    result = import_phyphox(tmp_path / "export.xlsx", ball="pingpong")
     np.testing.assert_allclose(result.dataset.t, TIMES, atol=1e-12)
     assert result.info[0].startswith("xlsx") and len(result.dataset.t) == len(TIMES)
 
@@ -411,7 +418,7 @@ def test_phyphox_xlsx_without_openpyxl_says_so(tmp_path, monkeypatch):
     (tmp_path / "e.xlsx").write_bytes(b"PK\x03\x04" + bytes(100))
     monkeypatch.setattr(builtins, "__import__", no_openpyxl)
     with pytest.raises(ValueError, match=r"e\.xlsx: an \.xlsx workbook; reading it needs openpyxl"):
-        import_phyphox(tmp_path / "e.xlsx")
+        import_phyphox(tmp_path / "e.xlsx", ball="pingpong")
 
 
 def test_phyphox_duplicates_and_suspicious_rows(tmp_path):
@@ -423,7 +430,7 @@ def test_phyphox_duplicates_and_suspicious_rows(tmp_path):
         f"{v:.6f}," + ("" if i == 0 else f"{v - t[i - 1]:.6f}") for i, v in enumerate(t)
     )
     (tmp_path / "faulty.csv").write_text(text + "\n")
-    result = import_phyphox(tmp_path / "faulty.csv")
+    result = import_phyphox(tmp_path / "faulty.csv", ball="pingpong")
     reasons = {r.line: r.reason for r in result.rejected}
     assert set(reasons) == {5, 12, 13}
     assert "negative interval" in reasons[5] and "duplicate" in reasons[13]
@@ -451,7 +458,7 @@ def test_bundled_phyphox_exports_against_truth():
     assert len(truth) <= 5
     for name, onsets in truth.items():
         x0 = int(re.search(r"(\d+)cm", name).group(1)) / 100
-        result = import_phyphox(os.path.join(DATA, name), x0=x0)
+        result = import_phyphox(os.path.join(DATA, name), x0=x0, ball="pingpong")
         t = result.dataset.t
         # phyphox's own convention: the interval to the next event, 0 on the last row.
         assert any("to the NEXT event" in n for n in result.notes)
@@ -508,7 +515,7 @@ def _track(header, heights, *, sep=",", dec=".", preamble=None, times=TRACK_T):
 def test_video_units_to_metres(tmp_path, label, header, scale_from_unit, kw):
     path = tmp_path / f"{label}.csv"
     path.write_text(_track(header, TRACK_Y * scale_from_unit, **kw))
-    result = import_video(path)
+    result = import_video(path, ball="pingpong")
     ds = result.dataset
     assert (ds.observe, ds.scene, ds.v0) == ("trace", "drop", 0.0)
     np.testing.assert_allclose(ds.t, TRACK_T - TRACK_T[0], atol=2e-6)  # t = 0 at the first frame
@@ -524,27 +531,29 @@ def test_video_column_and_scale(tmp_path):
     with pytest.raises(
         ValueError, match=r"px\.csv: line 1: column 'y \(px\)': unit 'px' is not a length unit"
     ):
-        import_video(path)
-    ds = import_video(path, scale=1e-3).dataset
+        import_video(path, ball="pingpong")
+    ds = import_video(path, scale=1e-3, ball="pingpong").dataset
     np.testing.assert_allclose(ds.x, TRACK_Y, atol=1e-8)
-    ds = import_video(path, column="h", scale=2.0).dataset
+    ds = import_video(path, column="h", scale=2.0, ball="pingpong").dataset
     np.testing.assert_allclose(ds.x, 0.02, atol=1e-12)
     # No y column: the second column; no unit: --scale needed.
     (tmp_path / "z.csv").write_text(_track(("t (s)", "height", "other"), TRACK_Y * 100))
     with pytest.raises(ValueError, match=r"z\.csv: line 1: column 'height' has no unit.*--scale"):
-        import_video(tmp_path / "z.csv")
-    np.testing.assert_allclose(import_video(tmp_path / "z.csv", scale=0.01).dataset.x, TRACK_Y, atol=1e-8)
+        import_video(tmp_path / "z.csv", ball="pingpong")
+    np.testing.assert_allclose(
+        import_video(tmp_path / "z.csv", scale=0.01, ball="pingpong").dataset.x, TRACK_Y, atol=1e-8
+    )
     with pytest.raises(
         ValueError, match=r"--column 'q' is not a column; columns: 't \(s\)', 'height', 'other'"
     ):
-        import_video(tmp_path / "z.csv", column="q", scale=1)
+        import_video(tmp_path / "z.csv", column="q", scale=1, ball="pingpong")
 
 
 def test_video_untracked_frames_reported(tmp_path):
     text = _track(("t (s)", "y (cm)", "x (cm)"), TRACK_Y * 100).splitlines()
     text[4] = f"{TRACK_T[3]:.6f},,0.01"  # Tracker leaves an untracked frame empty
     (tmp_path / "gap.csv").write_text("\n".join(text) + "\n")
-    result = import_video(tmp_path / "gap.csv")
+    result = import_video(tmp_path / "gap.csv", ball="pingpong")
     (r,) = result.rejected
     assert r.line == 5 and "untracked frame" in r.reason and len(result.dataset.t) == 7
 
@@ -616,7 +625,7 @@ def test_bad_files_give_one_line_with_file_line_and_cause(tmp_path, kind, label,
     path.write_text(text, encoding="utf-8")
     before = path.read_bytes()
     with pytest.raises(ValueError) as err:
-        (import_phyphox if kind == "phyphox" else import_video)(path)
+        (import_phyphox if kind == "phyphox" else import_video)(path, ball="pingpong")
     message = str(err.value)
     assert "\n" not in message and message.startswith(f"{path}: {line}:") and cause in message, message
     assert path.read_bytes() == before
@@ -636,7 +645,8 @@ def test_cli_import_bundled_files(tmp_path, capsys):
     before = open(wav, "rb").read()
     out, png = tmp_path / "phone.csv", tmp_path / "phone.png"
     code, stdout, err = _run(
-        ["import", "wav", wav, "--out", str(out), "--plot", str(png), "--x0", "0.25"], capsys
+        ["import", "wav", wav, "--ball", "pingpong", "--out", str(out), "--plot", str(png), "--x0", "0.25"],
+        capsys,
     )
     assert code == 0, err
     assert (
@@ -663,6 +673,8 @@ def test_cli_import_bundled_files(tmp_path, capsys):
                 "5e-4",
                 "--mass",
                 "0.0028",
+                "--drag",
+                "0.12",
             ],
             capsys,
         )
@@ -672,7 +684,16 @@ def test_cli_import_bundled_files(tmp_path, capsys):
         assert "x0 = " in out.read_text() and "with the interval ratios' e = " in out.read_text()
     (tmp_path / "track.csv").write_text(_track(("t", "y (cm)", "x (cm)"), TRACK_Y * 100, preamble="mass A"))
     code, stdout, err = _run(
-        ["import", "video", str(tmp_path / "track.csv"), "--out", str(tmp_path / "v.csv")], capsys
+        [
+            "import",
+            "video",
+            str(tmp_path / "track.csv"),
+            "--ball",
+            "pingpong",
+            "--out",
+            str(tmp_path / "v.csv"),
+        ],
+        capsys,
     )
     assert code == 0, err
     np.testing.assert_allclose(load_dataset(tmp_path / "v.csv").x, TRACK_Y, atol=1e-8)
@@ -689,11 +710,22 @@ def test_cli_refuses_to_overwrite_the_source(tmp_path, capsys):
         spellings = [str(src), os.path.join(str(tmp_path), ".", "sub", "..", name), str(link)]
         os.makedirs(tmp_path / "sub", exist_ok=True)
         for out in spellings:
-            code, stdout, err = _run(["import", kind, str(src), "--out", out], capsys)
+            code, stdout, err = _run(["import", kind, str(src), "--ball", "pingpong", "--out", out], capsys)
             assert code == 2 and stdout == "", (out, stdout)
             assert err.count("\n") == 1 and "--out" in err and "refusing to overwrite" in err
         code, _, err = _run(
-            ["import", kind, str(src), "--out", str(tmp_path / "ok.csv"), "--plot", str(src)], capsys
+            [
+                "import",
+                kind,
+                str(src),
+                "--ball",
+                "pingpong",
+                "--out",
+                str(tmp_path / "ok.csv"),
+                "--plot",
+                str(src),
+            ],
+            capsys,
         )
         assert code == 2 and "--plot" in err and "refusing to overwrite" in err
         assert src.read_bytes() == before
@@ -702,10 +734,14 @@ def test_cli_refuses_to_overwrite_the_source(tmp_path, capsys):
 def test_cli_errors_and_help(tmp_path, capsys):
     bad = tmp_path / "bad.csv"
     bad.write_text('"Event time (s)","Interval (s)"\n1,483583,\n1,937875,0,454292\n')
-    code, _, err = _run(["import", "phyphox", str(bad), "--out", str(tmp_path / "o.csv")], capsys)
+    code, _, err = _run(
+        ["import", "phyphox", str(bad), "--ball", "tennis", "--out", str(tmp_path / "o.csv")], capsys
+    )
     assert code == 2 and err.count("\n") == 1 and "bad.csv: line 2:" in err and "decimal commas" in err
     assert not (tmp_path / "o.csv").exists()
-    code, _, err = _run(["import", "wav", str(bad), "--out", str(tmp_path / "o.csv")], capsys)
+    code, _, err = _run(
+        ["import", "wav", str(bad), "--ball", "golf", "--out", str(tmp_path / "o.csv")], capsys
+    )
     assert code == 2 and "not a WAV file" in err
     code, _, err = _run(["import", "wav", str(bad), "--out", str(tmp_path / "o.csv"), "--mass", "-1"], capsys)
     assert code == 2 and "mass = -1 kg is out of range" in err
@@ -714,14 +750,15 @@ def test_cli_errors_and_help(tmp_path, capsys):
     code, stdout, _ = _run(["import", "wav", "--help"], capsys)
     assert code == 0
     text = " ".join(stdout.split())
-    assert "the e of the interval ratios" in text and "default 2.7e-3" in text and "default 0.12" in text
+    assert "the e of the interval ratios" in text and "--ball NAME" in text and "pingpong, tennis" in text
+    assert "--diameter M" in text and "C_d = 0.47" in text and "default 1.204" in text
     assert "--min-gap" in text and "default 0.03" in text
     code, stdout, _ = _run(["import", "video", "--help"], capsys)
     assert "--column" in stdout and "--scale" in stdout and "first frame" in " ".join(stdout.split())
 
 
 def test_result_write_and_text(tmp_path):
-    result = import_phyphox(os.path.join(DATA, "phyphox_drop_30cm.csv"))
+    result = import_phyphox(os.path.join(DATA, "phyphox_drop_30cm.csv"), ball="pingpong")
     text = result.text()
     assert text.startswith("# jaxunilat-data: 1\n") and "## left out: line 19:" in text
     result.write(tmp_path / "a.csv")

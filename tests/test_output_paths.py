@@ -34,12 +34,15 @@ COMMANDS = {
     ("qualify",): dict(argv=["{FIT}"], inputs={"FIT": "fit.json"}),
     ("reproduce",): dict(argv=["--quick"], inputs={}, dirs={"--out"}),
     ("bench",): dict(argv=["--size", "tiny"], inputs={}, dirs={"--out"}),
-    ("import", "wav"): dict(argv=["{SOURCE}", "--out", "imported.csv"], inputs={"SOURCE": "phone_drop.wav"}),
+    ("import", "wav"): dict(
+        argv=["{SOURCE}", "--ball", "pingpong", "--out", "imported.csv"], inputs={"SOURCE": "phone_drop.wav"}
+    ),
     ("import", "phyphox"): dict(
-        argv=["{SOURCE}", "--out", "imported.csv"], inputs={"SOURCE": "phyphox_drop_10cm.csv"}
+        argv=["{SOURCE}", "--ball", "pingpong", "--out", "imported.csv"],
+        inputs={"SOURCE": "phyphox_drop_10cm.csv"},
     ),
     ("import", "video"): dict(
-        argv=["{SOURCE}", "--out", "imported.csv"], inputs={"SOURCE": "drop_trace.csv"}
+        argv=["{SOURCE}", "--ball", "pingpong", "--out", "imported.csv"], inputs={"SOURCE": "drop_trace.csv"}
     ),
 }
 

@@ -21,13 +21,21 @@ pytestmark = pytest.mark.skipif(
 )
 
 
+#: The ball of each recording, as the recordings' README states it.
+BALLS = {
+    "eeps_pingpong.wav": dict(ball="pingpong"),
+    "mth337_basketball.wav": dict(ball="basketball"),
+    "mth337_rubberball.wav": dict(mass=0.05, drag=0.04),
+}
+
+
 def _wavs():
     return sorted(glob.glob(os.path.join(REAL, "*.wav"))) if os.path.isdir(REAL) else []
 
 
 @pytest.mark.parametrize("path", _wavs(), ids=os.path.basename)
 def test_every_real_wav_imports_with_defaults(path):
-    result = import_wav(path)  # raises ImplausibleRecording if the gate refuses it
+    result = import_wav(path, **BALLS[os.path.basename(path)])  # raises ImplausibleRecording if refused
     assert result.problems == () and len(result.accepted) >= 10, result.summary()
     det = result.detection
     assert len(det.onset) == len(det.accepted) == len(det.peak)  # every candidate reported
@@ -35,7 +43,7 @@ def test_every_real_wav_imports_with_defaults(path):
 
 
 def test_pingpong_matches_the_authors_bounce_times():
-    result = import_wav(os.path.join(REAL, "eeps_pingpong.wav"))
+    result = import_wav(os.path.join(REAL, "eeps_pingpong.wav"), ball="pingpong")
     found = result.accepted
     author = np.loadtxt(
         os.path.join(REAL, "eeps_pingpong_author_bounce_times.csv"), delimiter=",", skiprows=1, usecols=0
@@ -66,7 +74,7 @@ def test_pingpong_matches_the_authors_bounce_times():
     ],
 )
 def test_basketball_and_rubber_ball(name, count, e_band):
-    result = import_wav(os.path.join(REAL, name))
+    result = import_wav(os.path.join(REAL, name), **BALLS[name])
     found = result.accepted
     assert count[0] <= len(found) <= count[1], result.summary()
     chain = ratio_chain(found)

@@ -8,7 +8,8 @@ is skipped, saying so, where that folder is absent (a user's own clone).
 What the ball must give (the reference e of each recording, from a fit made
 independently of this project with scipy: constant restitution, quadratic drag,
 instant impacts) is written below with its source. The contract: every recording
-imports with default settings (only its metadata given: release height, mass, drag),
+imports with default settings (only its metadata given: release height, and the ball: a
+`--ball` preset or its mass and drag),
 and `identify` either reports an e within ±0.02 of the reference (the blue ball's
 throws vary: 0.80-0.93), or exits 3 saying why. Never exit 0 with a number the data
 contradict.
@@ -32,10 +33,13 @@ pytestmark = pytest.mark.skipif(
 )
 
 #: Per item: the files, the metadata given to the importer, and the accepted e band.
-#: Masses and drags: a ping-pong ball 2.7 g, k = 0.12 s/m; the others as the recordings'
-#: sources state them (drag k = 1/terminal speed).
+#: The balls: the ping-pong and tennis balls by their presets (`--ball`: 2.7 g, k = 0.116 s/m;
+#: 57.7 g, k = 0.0454 s/m); the others' masses and drags as the recordings' sources state them
+#: (drag k = 1/terminal speed).
 ITEMS = {
-    "pingpong": dict(files=["eeps_pingpong.wav"], kind="wav", args=[], band=(0.9268, 0.9668)),
+    "pingpong": dict(
+        files=["eeps_pingpong.wav"], kind="wav", args=["--ball", "pingpong"], band=(0.9268, 0.9668)
+    ),
     "basketball": dict(
         files=["mth337_basketball.wav"],
         kind="wav",
@@ -57,7 +61,7 @@ ITEMS = {
     "tennis": dict(
         folder="giiulia_tennis_ball",
         kind="phyphox",
-        args=["--mass", "0.057", "--drag", "0.046"],
+        args=["--ball", "tennis"],
         band=(0.740, 0.794),
     ),
     "golf": dict(
@@ -116,6 +120,9 @@ def test_a_real_recording_gives_the_reference_e_or_exit_3(item, path, tmp_path, 
         return
     assert code == 0, f"{out}\n{err}"
     assert lo <= e <= hi, f"e = {e:.4f} outside {lo}-{hi}, exit 0:\n{out}"
+    # Onset timing of ~1 ms (a phone, a lab microphone, phyphox) cannot resolve a contact of
+    # about a millisecond: κ and t_c are never the data's (the recordings' README says so).
+    assert not fit["identifiable"]["kappa"] and not fit["identifiable"]["contact_time"], out
     ci = fit["derived"]["restitution"]["ci95"]
     assert ci[0] < e < ci[1] and 1e-4 < (ci[1] - ci[0]) / 2 < 0.1, f"the 95% CI of e {ci} is not honest"
 
@@ -130,7 +137,9 @@ def test_eeps_onsets_match_the_authors_bounce_times(capsys, tmp_path):
     author = np.asarray(author) * 1e-3
     import identify
 
-    onsets = np.asarray(identify.import_wav(os.path.join(REAL, "eeps_pingpong.wav")).dataset.t)
+    onsets = np.asarray(
+        identify.import_wav(os.path.join(REAL, "eeps_pingpong.wav"), ball="pingpong").dataset.t
+    )
     inside = onsets[(onsets > author[0] - 0.05) & (onsets < author[-1] + 0.02)]
     assert len(inside) == len(author), (inside, author)
     shift = float(np.median(author - inside))

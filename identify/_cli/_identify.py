@@ -26,8 +26,9 @@ def register(commands) -> None:
         description="Fit kappa and k_r of the ball model [K90 Eq. 3.1-3.3] to one or several rebound data "
         "files (format: data/README.md; `jaxunilat import` converts recordings) with the event mode; report "
         "estimates, 95% CIs, derived e and t_c, correlations, outliers and an identifiability verdict. "
-        "Several files are fitted jointly: kappa, k_r (and drag) shared, each file its own x0, v0, offset. "
-        "The clock offset of impact onsets is fitted by default (--freeze offset holds it). Exit status: 0 "
+        "Several files are fitted jointly: kappa, k_r (and drag) shared, each file its own x0, v0, offset "
+        "(and a trace's scale, level). The clock offset of impact onsets, and a trace's length scale and "
+        "contact level, are fitted by default (--freeze offset, --freeze scale,level hold them). Exit status: 0 "
         "converged, 3 not converged or contradicted by the data's own closed-form restitution or release "
         "height (the JSON is still written, with converged: false and the reasons), 2 bad input.",
     )
@@ -44,15 +45,17 @@ def register(commands) -> None:
         "--fit",
         default="",
         metavar="NAMES",
-        help="nuisance parameters to fit too, comma-separated from drag,x0,v0,offset (offset: the recording's "
-        "unknown time origin, for impact onsets and traces)",
+        help="nuisance parameters to fit too, comma-separated from drag,x0,v0,offset,scale,level (offset: the "
+        "recording's unknown time origin, for impact onsets and traces; scale, level: a trace's length scale and "
+        "contact level, data = level + scale * model position, fitted by default for traces)",
     )
     p.add_argument(
         "--freeze",
         default="",
         metavar="NAMES",
-        help="parameters held at their file values, comma-separated from kappa,k_r,drag,x0,v0,offset (e.g. "
-        "offset, when impact onsets are timed from the release; by default the offset of impact onsets is "
+        help="parameters held at their file values, comma-separated from kappa,k_r,drag,x0,v0,offset,scale,level "
+        "(e.g. offset, when impact onsets are timed from the release; scale,level (held at 1, 0) when a trace's "
+        "calibration was measured; by default the offset of impact onsets and a trace's scale and level are "
         "fitted)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the starts' jitter (default 0)")
@@ -85,6 +88,20 @@ def register(commands) -> None:
         help="fit the first (1 - F) of each file's rows and predict the rest (0 <= F < 1; default 0)",
     )
     p.add_argument("--profile", action="store_true", help="also compute the profile likelihood of kappa")
+    p.add_argument(
+        "--mass",
+        type=float,
+        metavar="KG",
+        help="the ball's mass, kg, replacing every data file's (the report and the JSON say so, with the file's "
+        "value); the drag stays the file's unless --drag is given",
+    )
+    p.add_argument(
+        "--drag",
+        type=float,
+        metavar="S_PER_M",
+        help="quadratic drag k = 1/terminal speed, s/m, replacing every data file's (held, or the start of a "
+        "fit with --fit drag)",
+    )
     p.set_defaults(func=_run_identify)
 
 
@@ -99,7 +116,7 @@ def _names(text: str, flag: str, valid, what: str) -> tuple[str, ...]:
 
 def _checked_arguments(args) -> tuple[tuple[str, ...], tuple[str, ...], list[str]]:
     """`--fit`, `--freeze` and the data paths, checked with the outputs before any work."""
-    from jaxunilat.internal import check_output_paths, check_plot_format, input_errors
+    from jaxunilat.internal import check_output_paths, check_plot_format, check_range, input_errors
 
     from .. import NUISANCE, PARAMETERS
 
@@ -109,6 +126,8 @@ def _checked_arguments(args) -> tuple[tuple[str, ...], tuple[str, ...], list[str
         raise InputError(f"--starts {args.starts} is out of range; valid range is integers >= 1")
     if args.seed < 0:
         raise InputError(f"--seed {args.seed} is out of range; valid range is integers >= 0")
+    check_range("--mass", args.mass, lo=0.0, lo_open=True, unit="kg", allow_none=True)
+    check_range("--drag", args.drag, lo=0.0, unit="s/m", allow_none=True)
     paths = list(args.data) or [default_data_path()]
     inputs = [(f"DATA {i + 1}" if len(paths) > 1 else "DATA", path) for i, path in enumerate(paths)]
     with input_errors():
@@ -127,6 +146,7 @@ def _run_identify(args) -> int:
     nuisance, freeze, paths = _checked_arguments(args)
     with input_errors():
         data = [load_dataset(path) for path in paths]
+        data, overrides = _overridden(data, mass=args.mass, drag=args.drag)
     result = fit(
         data if len(data) > 1 else data[0],
         nuisance=nuisance,
@@ -141,11 +161,16 @@ def _run_identify(args) -> int:
         outlier_threshold=args.outlier_threshold,
         holdout=args.holdout,
     )
+    result.notes[:0] = [o["note"] for o in overrides.values()]
     print(result.report())
     with output_errors():
         if args.json is not None:
+            doc = result.to_json_dict()
+            doc["overrides"] = {
+                name: {k: v for k, v in o.items() if k != "note"} for name, o in overrides.items()
+            }
             with write_atomically(args.json, encoding="utf-8") as fh:
-                json.dump(result.to_json_dict(), fh, indent=2, allow_nan=False)
+                json.dump(doc, fh, indent=2, allow_nan=False)
             print(f"wrote {args.json}")
         if args.plot is not None:
             from jaxunilat.plot import save_figure
@@ -155,6 +180,31 @@ def _run_identify(args) -> int:
             save_figure(plot_fit(result), args.plot)
             print(f"wrote {args.plot}")
     return _verdict(result)
+
+
+def _overridden(data: list, **values) -> tuple[list, dict]:
+    """The data sets with the fields in `values` that are not None (`mass`, `drag`) replaced,
+    and per replaced field {"value", "files": the files' own values, "note": one line}."""
+    import dataclasses
+    import os
+
+    units = {"mass": "kg", "drag": "s/m"}
+    overrides = {}
+    for name, value in values.items():
+        if value is None:
+            continue
+        before = [float(getattr(d, name)) for d in data]
+        data = [dataclasses.replace(d, **{name: value}) for d in data]
+        if len(data) == 1:
+            was = f"file: {before[0]:g} {units[name]}"
+        else:
+            was = "files: " + ", ".join(
+                f"{os.path.basename(d.path or '?')} {b:g}" for d, b in zip(data, before, strict=True)
+            )
+            was += f" {units[name]}"
+        note = f"{name} overridden: {value:g} {units[name]} ({was})"
+        overrides[name] = {"value": float(value), "files": before, "note": note}
+    return data, overrides
 
 
 def _verdict(result) -> int:

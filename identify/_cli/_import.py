@@ -1,9 +1,13 @@
-"""`jaxunilat import wav|phyphox|video SOURCE --out DATA.csv`: recordings to data files.
+"""`jaxunilat import wav|phyphox|video SOURCE --ball NAME --out DATA.csv`: recordings to data files.
 
-    jaxunilat import wav SOURCE.wav --out DATA.csv [--mass M] [--drag K] [--x0 H] [--v0 V]
-                     [--noise S] [--plot PNG] [--threshold K] [--dead-time S] [--min-gap S]
-    jaxunilat import phyphox SOURCE.csv|.xlsx --out DATA.csv [...]
-    jaxunilat import video SOURCE.csv --out DATA.csv [--column NAME] [--scale F] [...]
+    jaxunilat import wav SOURCE.wav --ball NAME --out DATA.csv [--mass KG] [--diameter M] [--drag K]
+                     [--air-density RHO] [--x0 H] [--v0 V] [--noise S] [--plot PNG]
+                     [--threshold K] [--dead-time S] [--min-gap S]
+    jaxunilat import phyphox SOURCE.csv|.xlsx --mass KG --diameter M --out DATA.csv [...]
+    jaxunilat import video SOURCE.csv --ball NAME --out DATA.csv [--column NAME] [--scale F] [...]
+
+The ball must be stated: `--ball NAME` (a preset of `identify.BALLS`), or `--mass`
+with `--diameter` (or `--drag`); `--mass`, `--diameter`, `--drag` override a preset's.
 
 Prints what was found (onsets kept, those left out with reasons, warnings, the
 timing-noise estimate) and writes a `jaxunilat-data` file (data/README.md), the onsets
@@ -14,6 +18,8 @@ left out as `##` comment lines. The source is only read; an output path that nam
 from __future__ import annotations
 
 from jaxunilat.internal import EXIT_NOT_CONVERGED
+
+from .. import AIR_DENSITY, BALLS
 
 _X0_IMPACTS = (
     "release height x0, m (default: estimated from the first interval T1 with the e of the interval ratios "
@@ -28,8 +34,7 @@ def _source_kind(sources, kind: str, *, source_help: str, x0_help: str, noise_he
     p.add_argument(
         "--out", metavar="DATA.csv", required=True, help="the data file to write (replaced if it exists)"
     )
-    p.add_argument("--mass", type=float, help="ball mass, kg (default 2.7e-3, a 40 mm ITTF ball)")
-    p.add_argument("--drag", type=float, help="quadratic drag k = 1/terminal speed, s/m (default 0.12)")
+    _ball_arguments(p)
     p.add_argument("--x0", type=float, help=x0_help)
     p.add_argument("--v0", type=float, help="velocity at t = 0, m/s (default 0: released from rest)")
     p.add_argument("--noise", type=float, metavar="S", help=noise_help)
@@ -47,6 +52,39 @@ def _source_kind(sources, kind: str, *, source_help: str, x0_help: str, noise_he
     return p
 
 
+def _ball_arguments(p) -> None:
+    """The ball's flags: --ball, --mass, --diameter, --drag, --air-density."""
+    p.add_argument(
+        "--ball",
+        choices=list(BALLS),
+        metavar="NAME",
+        help=f"the ball, a preset ({', '.join(BALLS)}): mass and diameter from its governing body's rules "
+        "(pingpong: ITTF, 40 mm, 2.7 g; tennis: ITF; golf: USGA/R&A; basketball: FIBA size 7; ...), "
+        "steel and glass-marble from the material's density (steel needs --diameter); the drag follows from "
+        "them. Required, unless --mass is given with --diameter or --drag",
+    )
+    p.add_argument("--mass", type=float, metavar="KG", help="ball mass, kg (overrides the preset's)")
+    p.add_argument(
+        "--diameter",
+        type=float,
+        metavar="M",
+        help="ball diameter, m (overrides the preset's; gives the drag)",
+    )
+    p.add_argument(
+        "--drag",
+        type=float,
+        metavar="S_PER_M",
+        help="quadratic drag k = 1/terminal speed, s/m (default: from the diameter d and mass m, "
+        "k = sqrt(rho C_d pi d^2 / (8 m g)), C_d = 0.47 for a smooth sphere, 0.55 for a tennis ball's felt)",
+    )
+    p.add_argument(
+        "--air-density",
+        type=float,
+        metavar="RHO",
+        help=f"air density for that drag, kg/m^3 (default {AIR_DENSITY:g}: dry air at 20 C, 101.325 kPa)",
+    )
+
+
 def register(commands) -> None:
     """Add `import` (with its sources `wav`, `phyphox`, `video`) to the `jaxunilat` subparsers
     (the `jaxunilat.commands` entry point)."""
@@ -55,7 +93,8 @@ def register(commands) -> None:
         help="turn a recording (WAV, phyphox export, video-tracking CSV) into a data file",
         description="Turn a real-world recording into a jaxunilat data file (format: data/README.md): impact "
         "onsets from a WAV recording or a phyphox export, or a height trace from a video-tracking table. "
-        "Prints the onsets kept and those left out with reasons; the source file is only read.",
+        "Prints the onsets kept and those left out with reasons; the source file is only read. The ball must be "
+        "stated (--ball NAME, or --mass with --diameter or --drag): its mass and drag go into the data file.",
     )
     sources = p.add_subparsers(dest="source_kind", metavar="SOURCE_KIND", required=True, parser_class=type(p))
 
@@ -147,6 +186,12 @@ def register(commands) -> None:
 EXIT_NOT_A_BALL = EXIT_NOT_CONVERGED
 
 
+def _ball_options(args) -> dict:
+    """The ball as the command line states it (`identify.import_wav`'s keywords)."""
+    names = ("ball", "mass", "diameter", "drag", "air_density")
+    return {name: getattr(args, name) for name in names}
+
+
 def _detector_options(args) -> dict:
     """The WAV detector's settings given on the command line (none: its defaults)."""
     names = ("threshold", "rise", "dead_time", "min_gap")
@@ -193,7 +238,7 @@ def _imported(args):
 
     from .. import ImplausibleRecording, import_phyphox, import_video, import_wav
 
-    common = dict(mass=args.mass, drag=args.drag, x0=args.x0, v0=args.v0, noise=args.noise)
+    common = dict(**_ball_options(args), x0=args.x0, v0=args.v0, noise=args.noise)
     with input_errors():
         try:
             if args.source_kind == "wav":
@@ -206,11 +251,22 @@ def _imported(args):
 
 
 def _run_import(args) -> int:
-    from jaxunilat.internal import EXIT_OK, check_output_paths, check_plot_format, input_errors, output_errors
+    from jaxunilat.internal import (
+        EXIT_OK,
+        InputError,
+        check_output_paths,
+        check_plot_format,
+        input_errors,
+        output_errors,
+    )
 
-    from .. import ImplausibleRecording
+    from .. import ImplausibleRecording, ball_spec
 
     with input_errors():
+        try:  # the ball first: without it nothing can be written
+            ball_spec(**_ball_options(args), cli=True)
+        except ValueError as err:
+            raise InputError(f"import {args.source_kind}: {err}") from None
         check_output_paths(("--out", args.out), ("--plot", args.plot), inputs=(("SOURCE", args.source),))
     check_plot_format(args.plot)
     result = _imported(args)

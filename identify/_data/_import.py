@@ -1,4 +1,4 @@
-"""What the importers share: the result object, the defaults, the interval analysis.
+"""What the importers share: the result object, the ball, the interval analysis.
 
 An importer turns a recording (a WAV file, a phyphox export, a video-tracking table)
 into an `identify.Dataset` and says what it did: which onsets it kept, which it left
@@ -17,12 +17,9 @@ import numpy as np
 
 from jaxunilat.internal import InputError
 
+from ._balls import BallSpec, ball_spec
 from ._format import DEFAULT_GRAVITY, Dataset, _parse, format_dataset, write_text
 
-#: An ITTF 40 mm table-tennis ball, kg.
-DEFAULT_MASS = 2.7e-3
-#: Quadratic drag k = 1/terminal speed of that ball, s/m.
-DEFAULT_DRAG = 0.12
 #: The restitution assumed when the release height x0 is estimated from the first interval.
 ASSUMED_RESTITUTION = 0.95
 #: Successive bounce intervals of a ball: the ratio I[k+1]/I[k] lies in this range
@@ -148,15 +145,16 @@ def _with_comments(text: str, comments: list[str]) -> str:
     return "\n".join(lines[:header] + comments + lines[header:])
 
 
-def check_options(*, mass, drag, x0, v0, noise) -> None:
-    """Validate the metadata options (None: the default); `ValueError` names the flag."""
+def check_options(*, ball, mass, diameter, drag, air_density, x0, v0, noise) -> BallSpec:
+    """Validate the metadata options (None: the default; `ValueError` names the flag) and
+    return the ball's mass and drag (`ball_spec`: the ball must be stated)."""
     from jaxunilat.internal import check_range
 
-    check_range("mass", mass, lo=0.0, lo_open=True, unit="kg", allow_none=True)
-    check_range("drag", drag, lo=0.0, unit="s/m", allow_none=True)
+    spec = ball_spec(ball, mass=mass, diameter=diameter, drag=drag, air_density=air_density)
     check_range("x0", x0, lo=0.0, unit="m", allow_none=True)
     check_range("v0", v0, unit="m/s", allow_none=True)
     check_range("noise", noise, lo=0.0, lo_open=True, allow_none=True)
+    return spec
 
 
 def x0_from_first_interval(interval: float, *, restitution: float = ASSUMED_RESTITUTION) -> float:
@@ -166,15 +164,15 @@ def x0_from_first_interval(interval: float, *, restitution: float = ASSUMED_REST
     return DEFAULT_GRAVITY * interval**2 / (8.0 * restitution**2)
 
 
-def source_text(path: str, importer: str) -> str:
-    """The `source` metadata: the file's base name and the importer, one line."""
-    return _one_line(f"{os.path.basename(path)} (jaxunilat import {importer})")
+def source_text(path: str, importer: str, ball: str) -> str:
+    """The `source` metadata: the file's base name, the importer and the ball, one line."""
+    return _one_line(f"{os.path.basename(path)} (jaxunilat import {importer}, ball: {ball})")
 
 
 def impacts_dataset(
-    times: np.ndarray, *, source: str, importer: str, mass, drag, x0, v0, noise, x0_derived: bool = False
+    times: np.ndarray, *, source: str, importer: str, ball: BallSpec, x0, v0, noise, x0_derived: bool = False
 ) -> tuple[Dataset, list[str]]:
-    """An `observe = impacts` drop data set with the importers' defaults, and the notes.
+    """An `observe = impacts` drop data set of the ball `ball`, with the importers' defaults, and the notes.
 
     `times` are the onsets (s, recording clock, strictly increasing, at least 2). An x0
     that is None is estimated from the first interval; both it and an x0 the caller
@@ -208,8 +206,7 @@ def impacts_dataset(
         observe="impacts",
         source=source,
         importer=importer,
-        mass=mass,
-        drag=drag,
+        ball=ball,
         x0=x0,
         v0=v0,
         noise=noise,
@@ -219,22 +216,18 @@ def impacts_dataset(
     return ds, notes
 
 
-def drop_dataset(notes: list[str], *, source: str, importer: str, mass, drag, **fields) -> Dataset:
-    """A `scene = drop` data set with the importers' default mass and drag (None: the
-    default, noted in `notes`) and `source` naming the file and the importer; `fields`:
-    the other `Dataset` fields (observe, x0, v0, noise, t, x)."""
-    ds = Dataset(
+def drop_dataset(notes: list[str], *, source: str, importer: str, ball: BallSpec, **fields) -> Dataset:
+    """A `scene = drop` data set of the ball `ball` (its mass and drag; where they came from
+    is added to `notes`), `source` naming the file, the importer and the ball; `fields`: the
+    other `Dataset` fields (observe, x0, v0, noise, t, x)."""
+    notes += ball.notes
+    return Dataset(
         scene="drop",
-        mass=DEFAULT_MASS if mass is None else mass,
-        drag=DEFAULT_DRAG if drag is None else drag,
-        source=source_text(source, importer),
+        mass=ball.mass,
+        drag=ball.drag,
+        source=source_text(source, importer, ball.label),
         **fields,
     )
-    if mass is None:
-        notes.append(f"mass = {DEFAULT_MASS} kg (default: a 40 mm ITTF ball)")
-    if drag is None:
-        notes.append(f"drag = {DEFAULT_DRAG} s/m (default: a 40 mm ITTF ball)")
-    return ds
 
 
 # -- the interval sequence ----------------------------------------------------------------
@@ -485,8 +478,8 @@ def longest_flight(
     faster than sqrt(v0² + 2 g height) (energy: drag only takes some away) nor, with drag,
     faster than max(|v0|, 1/k) (falling, v̇ = g (1 − k² v²) draws the speed towards 1/k
     and never past it). The flight of the fastest take-off u (`flight_time`, increasing in
-    u) bounds every flight; the ball's mass enters only through k. With the default ball
-    (k = 0.12 s/m) it is 1.416 s, the terminal speed's limit (π/4 + asinh 1)/(g k), which a
+    u) bounds every flight; the ball's mass enters only through k. With k = 0.12 s/m (a
+    40 mm table-tennis ball) it is 1.416 s, the terminal speed's limit (π/4 + asinh 1)/(g k), which a
     ball would reach only after an endless fall."""
     speed = math.sqrt(v0 * v0 + 2.0 * gravity * height)
     why = f"it lands no faster than from {height:g} m, sqrt(v0^2 + 2 g h) = {speed:.3g} m/s"

@@ -808,8 +808,11 @@ def _why(j, onset, peak, keep, min_gap):
 def import_wav(
     path,
     *,
+    ball: str | None = None,
     mass: float | None = None,
+    diameter: float | None = None,
     drag: float | None = None,
+    air_density: float | None = None,
     x0: float | None = None,
     v0: float | None = None,
     noise: float | None = None,
@@ -824,7 +827,11 @@ def import_wav(
     **Arguments:**
 
     - `path`: the WAV file (only read).
-    - `mass`: kg (default 2.7e-3, a 40 mm ITTF ball). `drag`: s/m (default 0.12).
+    - The ball, which must be stated (an `InputError` otherwise): `ball`, a preset's name
+      (`identify.BALLS`: "pingpong", "tennis", ...), and/or `mass` (kg) with `diameter` (m)
+      or `drag` (s/m). `mass` and `diameter` replace the preset's; the drag k = 1/terminal
+      speed is computed from them (`identify.sphere_drag`, air of density `air_density`,
+      kg/m³, default 1.204) unless `drag` is given. The notes say where each value came from.
     - `x0`: the release height, m (default: estimated from the first interval assuming
       e = 0.95 and no drag, x0 = g T1²/(8 e²)). `v0`: m/s (default 0).
     - `noise`: the onset-time standard deviation, s (default: the timing-noise estimate).
@@ -836,7 +843,9 @@ def import_wav(
     **Returns:** an `ImportResult` (the data set, the accepted and rejected onsets with
     reasons, the timing-noise estimate, `summary()`).
     """
-    check_options(mass=mass, drag=drag, x0=x0, v0=v0, noise=noise)
+    spec = check_options(
+        ball=ball, mass=mass, diameter=diameter, drag=drag, air_density=air_density, x0=x0, v0=v0, noise=noise
+    )
     audio = read_wav(path)
     det = detect_onsets(
         audio.samples, audio.rate, threshold=threshold, dead_time=dead_time, min_gap=min_gap, rise=rise
@@ -853,8 +862,7 @@ def import_wav(
         onsets,
         source=name,
         importer="wav",
-        mass=mass,
-        drag=drag,
+        ball=spec,
         x0=x0,
         v0=v0,
         noise=det.timing_noise if noise is None else noise,

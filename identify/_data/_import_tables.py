@@ -436,8 +436,11 @@ MAX_LATE = 6
 def import_phyphox(
     path,
     *,
+    ball: str | None = None,
     mass: float | None = None,
+    diameter: float | None = None,
     drag: float | None = None,
+    air_density: float | None = None,
     x0: float | None = None,
     v0: float | None = None,
     noise: float | None = None,
@@ -468,8 +471,8 @@ def import_phyphox(
     **A late start.** With `x0` given (and v0 = 0), the first interval T1 must be the
     flight after a drop from x0; if it fits the flight after bounce n + 1 better (the
     export starts n bounces late), the data set's x0 becomes the apex before the first
-    recorded bounce, x0·e^(2n) with the ratio chain's e (drag-free; with `drag` given,
-    the apex of a quadratic-drag flight model), and a warning and a note say so with
+    recorded bounce, the apex of a quadratic-drag flight model with the ball's drag (x0·e^(2n)
+    with the ratio chain's e where the drag is 0), and a warning and a note say so with
     the given value.
 
     **Arguments:** as `import_wav` (`noise` default: none, so a fit estimates σ from its
@@ -479,7 +482,9 @@ def import_phyphox(
 
     **Returns:** an `ImportResult`.
     """
-    check_options(mass=mass, drag=drag, x0=x0, v0=v0, noise=noise)
+    spec = check_options(
+        ball=ball, mass=mass, diameter=diameter, drag=drag, air_density=air_density, x0=x0, v0=v0, noise=noise
+    )
     table = read_table(path)
     name = os.fspath(path)
     notes: list[str] = []
@@ -500,11 +505,10 @@ def import_phyphox(
         method = "robust scatter of the intervals about a smooth fit, /sqrt(2); not written as noise"
     given = x0
     if x0 is not None and not v0:
-        x0 = _late_start(times_a, x0, drag, notes, warnings)
+        x0 = _late_start(times_a, x0, spec.drag, notes, warnings)
     ds, more = impacts_dataset(
-        times_a, source=name, importer="phyphox", mass=mass, drag=drag, x0=x0, v0=v0, noise=noise,
-        x0_derived=x0 != given,
-    )  # fmt: skip
+        times_a, source=name, importer="phyphox", ball=spec, x0=x0, v0=v0, noise=noise, x0_derived=x0 != given
+    )
     notes += more
     _noise_note(noise, notes)
     result = _table_result(
@@ -931,8 +935,11 @@ def import_video(
     *,
     column: str | None = None,
     scale: float | None = None,
+    ball: str | None = None,
     mass: float | None = None,
+    diameter: float | None = None,
     drag: float | None = None,
+    air_density: float | None = None,
     x0: float | None = None,
     v0: float | None = None,
     noise: float | None = None,
@@ -951,14 +958,17 @@ def import_video(
     sample, and x0 (default: the first sample's height) and v0 (default 0) hold there.
     Heights must be measured up from the floor (put the tracking origin on the floor).
 
-    **Arguments:** `column`, `scale` as above; `mass`, `drag`, `x0`, `v0`, `noise` as
-    `import_wav` (`noise` default: none, a fit estimates it).
+    **Arguments:** `column`, `scale` as above; the ball (`ball`, `mass`, `diameter`, `drag`,
+    `air_density`: it must be stated), `x0`, `v0`, `noise` as `import_wav` (`noise`
+    default: none, a fit estimates it).
 
     **Returns:** an `ImportResult` (observe = trace: `t` in s, `x` in m).
     """
     from jaxunilat.internal import check_range
 
-    check_options(mass=mass, drag=drag, x0=x0, v0=v0, noise=noise)
+    spec = check_options(
+        ball=ball, mass=mass, diameter=diameter, drag=drag, air_density=air_density, x0=x0, v0=v0, noise=noise
+    )
     check_range("scale", scale, lo=0.0, lo_open=True, unit="m per unit", allow_none=True)
     table = read_table(path)
     name = os.fspath(path)
@@ -991,8 +1001,7 @@ def import_video(
         observe="trace",
         source=name,
         importer="video",
-        mass=mass,
-        drag=drag,
+        ball=spec,
         x0=x0,
         v0=v0,
         noise=noise,

@@ -26,16 +26,14 @@ def alone_restitution(setup, best: Point, rows, opts) -> list[dict]:
     Returns each file's `{"value", "stderr", "ci95"}`.
     """
     layout = Layout(
-        n_files=setup.layout.n_files, shared=("drag",), local=("kappa", "k_r", "x0", "v0", "offset")
+        n_files=setup.layout.n_files, shared=("drag",), local=("kappa", "k_r", *setup.layout.local)
     )
     joint_of = [
         int(setup.layout.index[f, PARAMETERS.index(n)]) for n, f in ((n, f or 0) for n, f in layout.names())
     ]
-    free = [
-        j
-        for j, (name, _) in enumerate(layout.names())
-        if (name in ("kappa", "k_r") or name in opts.nuisance) and name not in opts.freeze and name != "drag"
-    ]
+    # What the joint fit frees for a file, file by file (a trace's scale and level only
+    # where they apply and are not measured); the drag held.
+    free = [j for j, (name, _) in enumerate(layout.names()) if name != "drag" and joint_of[j] in setup.free]
     ev = setup.evaluator.with_(layout=layout, free=free, steps=setup.evaluator.steps[joint_of], prior=True)
     alone = dataclasses.replace(
         setup, layout=layout, evaluator=ev, free=free, lo=setup.lo[joint_of], hi=setup.hi[joint_of]
@@ -77,7 +75,8 @@ MAX_ALONE_STARTS = 4
 
 def alone_starts(setup, opts) -> list[tuple[int, np.ndarray]]:
     """Joint start points from each file fitted alone (one start, no robust pass):
-    κ, k_r (and drag) from file f's own optimum, every file's x0, v0 and offset from its own."""
+    κ, k_r (and drag) from file f's own optimum, every file's other entries (x0, v0, offset,
+    a trace's scale and level) from its own."""
     n = setup.layout.n_files
     if n < 2 or n > MAX_ALONE_STARTS:
         return []

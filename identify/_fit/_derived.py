@@ -14,7 +14,7 @@ from ._uncertainty import summarize
 
 
 def view(setup, z: np.ndarray, cov: np.ndarray, f: int = 0):
-    """File f's 6-vector, the covariance of its free entries, and their indices in PARAMETERS."""
+    """File f's z_f, the covariance of its free entries, and their indices in PARAMETERS."""
     idx = setup.layout.index[f]
     free6 = [i for i in range(len(PARAMETERS)) if idx[i] in setup.free]
     pos = [setup.free.index(idx[i]) for i in free6]

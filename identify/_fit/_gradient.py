@@ -20,7 +20,7 @@ def gradient_step(optimizer, gradient: str):
     a new jitted step for every fit would recompile the pass through the event mode).
 
     `gradient="forward"`: each file's Jacobian by `jax.jacfwd` through the event mode in
-    forward mode (`autodiff="forward"`, six tangents per file), then g = Jᵀ(w²r);
+    forward mode (`autodiff="forward"`, one tangent per entry of z), then g = Jᵀ(w²r);
     `"reverse"`: `jax.grad` of the loss.
     """
 

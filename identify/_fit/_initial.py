@@ -12,6 +12,8 @@ import math
 
 import numpy as np
 
+from ._trace_flights import apex_ratios, flight_meetings, trace_flights
+
 #: The contact-time prior, s: an assumed range, not a measurement.
 CONTACT_TIME_PRIOR = (0.5e-3, 2.0e-3)
 #: The prior's centre (geometric mean), s.
@@ -98,6 +100,20 @@ def initial_restitution(data) -> float | None:
             return restitution_from_impacts_with_drag(data.t, data.drag, data.gravity)
         return restitution_from_impacts(data.t)
     if data.scene == "drop":
+        # Successive flights' parabolas, at the closed-form scale and level: at video rates
+        # the samples never reach the contact, and a band above the lowest one merged flights.
+        found = trace_calibration(data.t, data.x, data.gravity)
+        if found is not None:
+            e = apex_ratios(
+                data.t,
+                data.x,
+                level=found[1],
+                scale=found[0],
+                drag=float(data.drag),
+                gravity=float(data.gravity),
+            )
+            if e.size:
+                return _clip_e(float(np.median(e)))
         heights = apex_heights_of_trace(data.t, data.x, data.noise)
         if len(heights) >= 1:
             drop = data.x0 if data.v0 == 0 else None
@@ -108,3 +124,28 @@ def initial_restitution(data) -> float | None:
 def first_impact_time(x0: float, v0: float, gravity: float) -> float:
     """Drag-free fall time from height x0 > 0 with upward speed v0 to x = 0, s."""
     return (v0 + math.sqrt(v0 * v0 + 2.0 * gravity * max(x0, 0.0))) / gravity
+
+
+def trace_calibration(t, x, gravity: float) -> tuple[float, float] | None:
+    """A drop-test trace's length scale and contact level in closed form, or None.
+
+    x_data = level + scale · x_model: every complete rebound flight gets a least-squares
+    parabola (`trace_flights`); its curvature against gravity gives the scale (flights
+    weighted by n·T⁴, the inverse variance of the curvature; drag cancels to first order
+    over a flight symmetric about its apex), and where two successive parabolas meet
+    (`flight_meetings`) gives the contact level (the median over contacts). None when
+    fewer than one complete flight is found, or the scale is outside 0.5–2.
+    """
+    t, x = np.asarray(t, dtype=float), np.asarray(x, dtype=float)
+    fits = trace_flights(t, x)
+    if not fits:
+        return None
+    weights = np.array([f.weight for f in fits])
+    curvature = np.array([-2.0 * f.coef[0] for f in fits])
+    scale = float(np.sum(weights * curvature) / np.sum(weights) / gravity)
+    if not 0.5 < scale < 2.0:
+        return None
+    levels = [height for _, _, height in flight_meetings(fits, t)]
+    if not levels:
+        return None
+    return scale, float(np.median(levels))

@@ -1,15 +1,15 @@
 """Several data sets in one fit: the joint parameter vector and its batched evaluator.
 
-**Layout.** Each data set f is predicted from its own 6-vector
-z_f = (log κ, log k_r, log k_drag, x0, v0, offset) (`PARAMETERS`). In a joint fit some
-of these entries are *shared* (one value for every file: the contact parameters and
-the drag) and the others are *local* (one value per file: the release state and the
-clock offset). The joint vector is
+**Layout.** Each data set f is predicted from its own vector
+z_f = (log κ, log k_r, log k_drag, x0, v0, offset, scale, level) (`PARAMETERS`). In a
+joint fit some of these entries are *shared* (one value for every file: the contact
+parameters and the drag) and the others are *local* (one value per file: the release
+state, the clock offset and a trace's length scale and level). The joint vector is
 
     z = (shared entries, in PARAMETERS order) + (file 0's local entries) + (file 1's …) + …
 
 so a fit of one file with the default layout has exactly z = z_0. `Layout.index[f]`
-holds the six joint indices that make z_f = z[index[f]].
+holds the joint indices that make z_f = z[index[f]].
 
 **Evaluation.** Data sets of one structure (scene, observation type, law) form a
 *group*; a group's problems are padded to the same number of observations and
@@ -18,9 +18,14 @@ finite-difference neighbours in one sequential loop: a fit of 30 files compiles 
 not 30 times. When a file's point itself fails, the neighbours are not run: the point
 is rejected whatever they give (the failing trial steps of a fit are the runs that go to
 `max_steps`, each the cost of hundreds of ordinary ones). A file's neighbours only perturb the joint entries that file depends
-on, so a file costs 1 + 2q runs (q: its free, non-shift entries) and the Jacobian is
-block-sparse: shared columns have a block from every file, local columns only from
-their own.
+on, so a file costs 1 + 2q runs (q: its free entries other than the closed-form ones) and
+the Jacobian is block-sparse: shared columns have a block from every file, local columns
+only from their own.
+
+**Closed-form columns.** Entries the prediction is linear in take no runs: the clock
+offset of impact onsets (onsets + offset: column 1/σ) and a trace's `level` and `scale`
+(level + scale · x_model: columns 1/σ and x_model/σ, with x_model = (prediction − level)/
+scale read off the point's own run). They are exact, not differences.
 """
 
 from __future__ import annotations
@@ -41,13 +46,15 @@ from ._problem import PARAMETERS, Problem, evaluate_rows, stack_problems
 #: Parameters that shift every prediction of impact onsets by their own value (onsets +
 #: offset): their Jacobian column is 1/σ exactly, so they take no runs (traces: differenced).
 SHIFTS = ("offset",)
+#: A trace's linear entries (prediction = level + scale · x_model): closed-form columns.
+TRACE_LINEAR = ("scale", "level")
 #: sd of log t_c in the steering prior: the 0.5–2 ms prior as ±2 sd around 1 ms.
 PRIOR_SD = math.log(2.0) / 2.0
 
 
 @dataclasses.dataclass(frozen=True)
 class Layout:
-    """Which of the six entries are shared across files and which are per file.
+    """Which entries of z are shared across files and which are per file.
 
     **Fields:** `n_files`; `shared`, the names with one joint entry; `local`, the names
     with one entry per file (together, all of `PARAMETERS`).
@@ -55,7 +62,7 @@ class Layout:
 
     n_files: int
     shared: tuple[str, ...] = ("kappa", "k_r", "drag")
-    local: tuple[str, ...] = ("x0", "v0", "offset")
+    local: tuple[str, ...] = ("x0", "v0", "offset", "scale", "level")
 
     @property
     def size(self) -> int:
@@ -64,7 +71,8 @@ class Layout:
 
     @functools.cached_property
     def index(self) -> np.ndarray:
-        """(files, 6) joint indices: z_f = z[index[f]] (computed once: every evaluation reads it)."""
+        """(files, len(PARAMETERS)) joint indices: z_f = z[index[f]] (computed once: every
+        evaluation reads it)."""
         out = np.zeros((self.n_files, len(PARAMETERS)), dtype=int)
         for f in range(self.n_files):
             for i, name in enumerate(PARAMETERS):
@@ -82,14 +90,14 @@ class Layout:
         return out
 
     def join(self, per_file: list[np.ndarray]) -> np.ndarray:
-        """A joint vector from per-file 6-vectors (shared entries from file 0)."""
+        """A joint vector from per-file vectors z_f (shared entries from file 0)."""
         z = np.zeros(self.size)
         for f, zf in enumerate(per_file):
             z[self.index[f]] = zf
         return z
 
     def split(self, z: np.ndarray) -> np.ndarray:
-        """(files, 6): every file's z_f."""
+        """(files, len(PARAMETERS)): every file's z_f."""
         return np.asarray(z)[self.index]
 
 
@@ -100,6 +108,7 @@ class Group:
     files: list[int]
     problem: Problem  # stacked: a leading file axis on every array leaf
     rows: list[int]  # each file's real observation count (the rest is padding)
+    y_obs: np.ndarray | None = None  # host copy of the stacked observations (closed-form columns)
 
 
 def make_groups(problems: list[Problem], rows: list[int]) -> list[Group]:
@@ -110,7 +119,12 @@ def make_groups(problems: list[Problem], rows: list[int]) -> list[Group]:
         key = key + (int(np.asarray(p.t_obs).shape[0]),)
         keys.setdefault(key, []).append(f)
     return [
-        Group(files=fs, problem=stack_problems([problems[f] for f in fs]), rows=[rows[f] for f in fs])
+        Group(
+            files=fs,
+            problem=stack_problems([problems[f] for f in fs]),
+            rows=[rows[f] for f in fs],
+            y_obs=np.stack([np.asarray(problems[f].y_obs, dtype=float) for f in fs]),
+        )
         for fs in keys.values()
     ]
 
@@ -161,26 +175,50 @@ class JointEvaluator:
         """This evaluator with `changes` to its fields (e.g. `prior=False`), sharing its call count."""
         return dataclasses.replace(self, **changes)
 
-    def _file_columns(self, f: int) -> tuple[list[int], list[int]]:
-        """Free joint entries file f depends on: (differenced, shifts)."""
+    def _file_columns(self, f: int) -> tuple[list[int], list[tuple[int, str]]]:
+        """Free joint entries file f depends on: (differenced, closed form as (entry, name))."""
         idx = self.layout.index[f]
         # Only impact onsets are shifted by the offset; a trace's samples are taken at
         # t − offset, so its column is −v(t)/σ and is differenced like the rest (a 1/σ
         # column there stopped `--fit offset` on a clean trace at "no decrease found").
-        shifts_here = SHIFTS if self._observe(f) == "impacts" else ()
-        fd, shifts = [], []
+        observe = self._observe(f)
+        closed_here = SHIFTS if observe == "impacts" else TRACE_LINEAR if observe == "trace" else ()
+        fd, closed = [], []
         for j in self.free:
             where = np.flatnonzero(idx == j)
             if where.size:
-                (fd if PARAMETERS[where[0]] not in shifts_here else shifts).append(j)
-        return fd, shifts
+                name = PARAMETERS[where[0]]
+                if name in closed_here:
+                    closed.append((j, name))
+                else:
+                    fd.append(j)
+        return fd, closed
+
+    def _group_of(self, f: int) -> tuple[Group, int]:
+        """File f's group and its position there."""
+        for g in self.groups:
+            if f in g.files:
+                return g, g.files.index(f)
+        raise AssertionError(f)
 
     def _observe(self, f: int) -> str:
         """File f's observation kind (from its group's stacked problem)."""
-        for g in self.groups:
-            if f in g.files:
-                return g.problem.observe
-        raise AssertionError(f)
+        return self._group_of(f)[0].problem.observe
+
+    def _closed_column(self, f: int, name: str, r0: np.ndarray, z_f: np.ndarray) -> np.ndarray:
+        """File f's exact Jacobian column of a closed-form entry at its point z_f (residuals r0).
+
+        The offset of impact onsets and a trace's level enter as + value: 1/σ. A trace's
+        scale multiplies the simulated position: x_model/σ, where x_model = (prediction −
+        level)/scale and prediction = σ·r0 + data.
+        """
+        sigma = float(self.sigmas[f])
+        if name != "scale":
+            return np.full(len(r0), 1.0 / sigma)
+        g, k = self._group_of(f)
+        y = g.y_obs[k, : len(r0)]
+        level, scale = z_f[PARAMETERS.index("level")], z_f[PARAMETERS.index("scale")]
+        return (sigma * r0 + y - level) / (scale * sigma)
 
     @property
     def rows(self) -> int:
@@ -208,7 +246,7 @@ class JointEvaluator:
     def _run(
         self, per_file_rows: list[np.ndarray], count: bool = True, skip: bool = True
     ) -> tuple[list, list]:
-        """Residuals (rows, n_f) and ok (rows,) of every file for its (rows, 6) points
+        """Residuals (rows, n_f) and ok (rows,) of every file for its (rows, len(PARAMETERS)) points
         (`count`: add the call to `calls`; `skip`: see `evaluate_rows`)."""
         res: list = [None] * self.layout.n_files
         oks: list = [None] * self.layout.n_files
@@ -241,23 +279,22 @@ class JointEvaluator:
         for f in range(self.layout.n_files):
             idx = self.layout.index[f]
             base = z[idx]
-            fd, shifts = self._file_columns(f)
+            fd, closed = self._file_columns(f)
             pts = np.repeat(base[None, :], rows, axis=0)
             for k, j in enumerate(fd):
                 pts[1 + 2 * k, idx == j] += self.steps[j]
                 pts[2 + 2 * k, idx == j] -= self.steps[j]
             points.append(pts)
-            plans.append((fd, shifts))
+            plans.append((fd, closed, base))
         res, oks = self._run(points)
         blocks_r, blocks_j, ok = [], [], True
-        for f, (fd, shifts) in enumerate(plans):
+        for f, (fd, closed, base) in enumerate(plans):
             r = res[f]
             jac = np.zeros((r.shape[1], len(self.free)))
             for k, j in enumerate(fd):
                 jac[:, self.free.index(j)] = (r[1 + 2 * k] - r[2 + 2 * k]) / (2 * self.steps[j])
-            for j in shifts:
-                # A shift: r = (prediction + value − data)/σ, so ∂r/∂value = 1/σ.
-                jac[:, self.free.index(j)] = 1.0 / self.sigmas[f]
+            for j, name in closed:
+                jac[:, self.free.index(j)] = self._closed_column(f, name, r[0], base)
             if f in self.transforms:
                 r0, jac = self.transforms[f](r[0], jac)
             else:

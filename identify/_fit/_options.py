@@ -10,7 +10,7 @@ import optax
 
 from jaxunilat.internal import InputError, check_choice, check_range
 
-from ._problem import LOG_PARAMETERS, NUISANCE, PARAMETERS
+from ._problem import LOG_PARAMETERS, NUISANCE, PARAMETERS, TRACE_ONLY
 from ._robust import fitted_count
 
 METHODS = ("lm", "optax")
@@ -133,14 +133,28 @@ def default_nuisance(datasets, nuisance: tuple, freeze: tuple) -> tuple[tuple, s
 
     - The clock offset where a file holds impact onsets: no recorder knows the release
       instant (hold it with `freeze=("offset",)` when the onsets are timed from the release).
-    - The release state x0, v0 of traces whose x0 is their own first sample (the video
-      importer's default): held there, every estimate would follow that one sample's noise
-      (κ from 13k to 56k N/m across noise seeds of a 1 mm trace, intervals excluding the
-      truth); a trace determines both. Only when every file is a trace, and not for x0
-      stated apart from the samples (the bundled trace: x0 = 0.305 m, first sample 0.304705 m).
+    - The release of traces whose x0 is their own first sample (the video importer's
+      default): held there, every estimate would follow that one sample's noise (κ from
+      13k to 56k N/m across noise seeds of a 1 mm trace, intervals excluding the truth).
+      For drops, the release height x0 and instant (`offset`), v0 held as stated (0: from
+      rest): a video track starts with the ball held still, or enters mid-fall, and a
+      free v0 fitted the held frames as an upward launch. For rackets, x0 and v0. Only
+      when every file is a trace, and not for x0 stated apart from the samples (the
+      bundled trace: x0 = 0.305 m, first sample 0.304705 m).
+    - x0, v0 where a file says they were estimated (`Dataset.estimated`, as `import wav`
+      and `import phyphox` write it without `--x0`): held at an estimate, the fit puts the
+      estimate's error into the contact time (a phone recording gave κ = 620 N/m ± 4% for a
+      truth of 54 000 with x0 estimated 6% low).
+    - A trace's length scale and contact level (`scale`, `level`; data = level + scale ·
+      model position): a video's pixels-to-metres factor comes from a ruler that
+      perspective puts 10–20% off, and its floor is set by hand to a pixel; held at (1, 0),
+      the contact time followed them (one pixel of level doubled t_c on a real trace),
+      while gravity and the bounces determine both. Fitted unless every trace states them
+      measured (`Dataset.measured`); a file that does holds its own (`_setup._free_names`).
 
     Returns the nuisance tuple and a note for the report ("" when nothing was added)."""
     notes = []
+    nuisance = _free_estimated(datasets, nuisance, freeze, notes)
     if "offset" not in nuisance and "offset" not in freeze and any(d.observe == "impacts" for d in datasets):
         notes.append(
             "clock offset fitted (impact onsets: a recording does not know the release instant; "
@@ -148,14 +162,72 @@ def default_nuisance(datasets, nuisance: tuple, freeze: tuple) -> tuple[tuple, s
         )
         nuisance = (*nuisance, "offset")
     if all(_x0_from_sample(d) for d in datasets):
-        added = tuple(n for n in ("x0", "v0") if n not in nuisance and n not in freeze)
+        # A drop from rest: the release height and instant (the frames before it show the
+        # ball held; a clip that starts mid-fall has its release before its first frame).
+        # Other scenes: the state at the first frame.
+        drops = all(d.scene == "drop" for d in datasets)
+        wanted = ("x0", "offset") if drops else ("x0", "v0")
+        added = tuple(n for n in wanted if n not in nuisance and n not in freeze)
         if added:
             nuisance = (*nuisance, *added)
-            notes.append(
-                f"{', '.join(added)} fitted: the file's x0 is its first sample's height, and one noisy sample "
-                "must not pin the release (hold them with --freeze x0,v0, or freeze=('x0', 'v0') in Python)"
+            why = (
+                "the ball is released from rest (v0 as stated) at an instant the frames do not know: frames before "
+                "it show the ball held, and a clip that starts mid-fall has it before its first frame"
+                if drops
+                else "one noisy sample must not pin the state"
             )
+            notes.append(
+                f"{', '.join(added)} fitted: the file's x0 is its first sample's height; {why} (hold them with "
+                f"--freeze {','.join(added)}, or freeze={added!r} in Python)"
+            )
+    nuisance = _free_calibration(datasets, nuisance, freeze, notes)
     return nuisance, "; ".join(notes)
+
+
+def _free_calibration(datasets, nuisance: tuple, freeze: tuple, notes: list) -> tuple:
+    """`nuisance` plus a trace's scale and level where some trace does not state them measured."""
+    traces = [d for d in datasets if d.observe == "trace"]
+    added = tuple(
+        n for n in TRACE_ONLY
+        if n not in nuisance and n not in freeze and any(n not in _measured(d) for d in traces)
+    )  # fmt: skip
+    if added:
+        notes.append(
+            f"{', '.join(added)} fitted (trace: data = level + scale * model position): a trace's length scale "
+            "and contact level are set by hand (a ruler, a floor pixel), and gravity and the bounces determine "
+            f"them (hold with --freeze {','.join(added)}, or freeze={added!r} in Python, or state them "
+            f"measured in the file: # measured = {','.join(added)})"
+        )
+    nuisance = (*nuisance, *added)
+    held = [
+        f"{n} of {d.path or 'a data set'}"
+        for d in traces
+        for n in TRACE_ONLY
+        if n in nuisance and n in _measured(d)
+    ]
+    if held:
+        notes.append(f"held where the file states them measured: {', '.join(held)}")
+    return nuisance
+
+
+def _measured(d) -> tuple[str, ...]:
+    """The names a data set states as measured (`Dataset.measured`)."""
+    return tuple(getattr(d, "measured", ()) or ())
+
+
+def _free_estimated(datasets, nuisance: tuple, freeze: tuple, notes: list) -> tuple:
+    """`nuisance` plus x0, v0 where some file says the importer estimated them."""
+    added = tuple(
+        n for n in ("x0", "v0")
+        if n not in nuisance and n not in freeze and any(n in d.estimated for d in datasets)
+    )  # fmt: skip
+    if added:
+        notes.append(
+            f"{', '.join(added)} fitted: the data file says {'they were' if len(added) > 1 else 'it was'} "
+            f"estimated, not measured (hold with --freeze {','.join(added)} only if you measured "
+            f"{'them' if len(added) > 1 else 'it'}; better, give the measured value to the importer)"
+        )
+    return (*nuisance, *added)
 
 
 def _x0_from_sample(d) -> bool:
@@ -233,6 +305,13 @@ def _check_names(datasets, nuisance: tuple, freeze: tuple) -> None:
                     "nuisance 'offset' (a time offset, s) applies to impact onsets and traces; "
                     f"{d.path or 'a data set'} has observe = 'apex'"
                 )
+    for name in TRACE_ONLY:
+        if name in nuisance and not any(d.observe == "trace" for d in datasets):
+            what = "length scale, data = level + scale * model" if name == "scale" else "contact level, m"
+            raise InputError(
+                f"nuisance {name!r} (a trace's {what}) applies to traces (observe = trace); "
+                f"{datasets[0].path or 'the data set'} has observe = {datasets[0].observe!r}"
+            )
     if set(freeze) >= {"kappa", "k_r"}:
         raise InputError("freeze = ('kappa', 'k_r') leaves nothing to fit; free at least one of them")
 
@@ -258,12 +337,13 @@ def check_start(initial, bounds):
     initial = dict(initial or {})
     for name, value in initial.items():
         check_choice("initial", name, PARAMETERS)
-        check_range(f"initial[{name!r}]", value, lo=0.0 if name in LOG_PARAMETERS else None, lo_open=True)
+        positive = name in LOG_PARAMETERS or name == "scale"
+        check_range(f"initial[{name!r}]", value, lo=0.0 if positive else None, lo_open=True)
     bounds = dict(bounds or {})
     for name, pair in bounds.items():
         check_choice("bounds", name, PARAMETERS)
         if len(pair) != 2 or not pair[0] < pair[1]:
             raise InputError(f"bounds[{name!r}] = {pair!r} must be a pair (lo, hi) with lo < hi")
-        if name in LOG_PARAMETERS and pair[0] <= 0:
+        if (name in LOG_PARAMETERS or name == "scale") and pair[0] <= 0:
             raise InputError(f"bounds[{name!r}] = {pair!r}: {name} is positive; valid lower bounds are > 0")
     return initial, bounds

@@ -142,6 +142,53 @@ def contradictions(result) -> list[str]:
     return out
 
 
+#: A trace whose first this-many rows are all outliers starts with something the fit
+#: cannot follow (a ball held before the release, a hand): never a silent trim.
+LEADING_OUTLIERS = 3
+
+
+def release_problems(result) -> list[str]:
+    """Why a trace's start contradicts a release from rest or a fall: [] when it does not.
+
+    - A block of at least `LEADING_OUTLIERS` outliers at the very start of a trace: the
+      robust pass took the frames before the release (the ball held still) for outliers
+      and fitted a launch through the rest.
+    - An upward launch speed v0 fitted at t = 0 (beyond its 95% interval): a "release"
+      that throws the ball up is a held ball's frames read as a flight, or a throw that
+      the file does not say was one.
+    """
+    out = []
+    files = result.datasets_data or []
+    for f, d in enumerate(files):
+        if d.observe != "trace" or d.scene != "drop" or f >= len(result.datasets):
+            continue
+        entry = result.datasets[f]
+        rows = sorted(o["row"] for o in entry.get("outliers", []))
+        lead = next((k for k, row in enumerate(rows) if row != k), len(rows))
+        if lead >= LEADING_OUTLIERS:
+            out.append(
+                f"{_name(d, f)}: the first {lead} rows are all outliers of the fit: the trace starts with "
+                "frames it cannot follow (a ball held still before the release, or a hand); trim them "
+                "(or import the track with jaxunilat import video, which finds the release)"
+            )
+        v0 = entry.get("parameters", {}).get("v0")
+        if v0 is not None and math.isfinite(v0["value"]) and v0["ci95"][0] > 0.0 and not _rises(d, entry):
+            out.append(
+                f"{_name(d, f)}: the fit launches the ball upward at the start (v0 = {v0['value']:.3g} m/s, "
+                f"95% CI from {v0['ci95'][0]:.3g} m/s): a drop does not; the trace may start with the "
+                "ball held, or x0 and the time origin are off"
+            )
+    return out
+
+
+def _rises(d, entry) -> bool:
+    """Whether a trace's own first samples rise (by 3 noise σ within its first 5 rows):
+    then an upward v0 is what the recording shows (it started after a bounce)."""
+    x = np.asarray(d.x[:5], dtype=float)
+    sigma = float(entry.get("sigma") or 0.0)
+    return bool(x.size > 1 and np.max(x[1:]) - x[0] > 3.0 * sigma)
+
+
 def _file_restitution(result, f: int, n_files: int) -> float | None:
     if n_files == 1:
         value = result.derived["restitution"]["value"]
@@ -164,7 +211,7 @@ def apply(result) -> None:
     """Run `contradictions` on `result` (and take a misfit verdict of its noise statement as
     one) and, where any, mark it: not converged, nothing identifiable, the reasons in
     `result.contradictions` and the message."""
-    found = contradictions(result)
+    found = contradictions(result) + release_problems(result)
     noise = result.noise or {}
     if noise.get("verdict") == "misfit":
         # Far more residual scatter than the data kind (or the stated noise, or a ball's

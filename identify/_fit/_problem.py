@@ -2,18 +2,26 @@
 
 The fitted vector z has a fixed layout, `PARAMETERS`:
 
-    z = (log κ, log k_r, log k_drag, x0, v0, offset)
+    z = (log κ, log k_r, log k_drag, x0, v0, offset, scale, level)
 
-in SI units (κ in N/m, k_r in N·s/m, drag k in s/m, x0 in m, v0 in m/s, offset in s).
-Logs make κ, k_r and drag positive and put the problem on a relative scale; which of
-the six entries are fitted is the fit's (static) choice, the rest are held at their
-values.
+in SI units (κ in N/m, k_r in N·s/m, drag k in s/m, x0 in m, v0 in m/s, offset in s,
+scale dimensionless, level in m). Logs make κ, k_r and drag positive and put the problem
+on a relative scale; which entries are fitted is the fit's (static) choice, the rest are
+held at their values.
+
+`scale` and `level` are a trace's length calibration (`TRACE_ONLY`): its position is
+x_data = level + scale · x_model(t), with x_model the simulator's position (m, floor at
+0; for two rackets, walls at ±gap/2) and x0, v0 physical. A video's scale (pixels to
+metres, from a ruler that perspective puts 10–20% off) and its floor level (set by hand
+to a pixel) are not measured; gravity fixes the scale through the flights' curvature,
+and the bounces fix the level. Other observations hold them at (1, 0).
 
 Each observation type predicts one vector from z with the event mode (exact contact,
 every entry located), [K90 §6]:
 
-- `trace`: the position x at the sample times (minus the clock offset, when a video's
-  time origin is unknown: frames before the release see the ball held at x0);
+- `trace`: the position level + scale · x at the sample times (minus the clock offset,
+  when a video's time origin is unknown: frames before the release see the ball held
+  at x0);
 - `impacts`: the contact onset times, plus the recording's unknown time offset. Each
   observed onset is matched to the *nearest* predicted onset (the model predicts a few
   more onsets than observed), so a missed quiet bounce costs nothing and a spurious
@@ -38,13 +46,27 @@ from jaxtyping import Array
 import jaxunilat as ju
 
 #: The fitted vector's entries, in order.
-PARAMETERS = ("kappa", "k_r", "drag", "x0", "v0", "offset")
+PARAMETERS = ("kappa", "k_r", "drag", "x0", "v0", "offset", "scale", "level")
 #: Entries stored as logs in z.
 LOG_PARAMETERS = ("kappa", "k_r", "drag")
 #: The nuisance parameters a fit may free (`fit(..., nuisance=...)`).
-NUISANCE = ("drag", "x0", "v0", "offset")
+NUISANCE = ("drag", "x0", "v0", "offset", "scale", "level")
+#: Nuisance parameters of traces only (a trace's length scale and contact level); every
+#: other observation holds them at their `NEUTRAL` values.
+TRACE_ONLY = ("scale", "level")
+#: The values that leave the data as they are: x_data = 0 + 1 · x_model.
+NEUTRAL = {"scale": 1.0, "level": 0.0}
 #: Units for reports.
-UNITS = {"kappa": "N/m", "k_r": "N*s/m", "drag": "s/m", "x0": "m", "v0": "m/s", "offset": "s"}
+UNITS = {
+    "kappa": "N/m",
+    "k_r": "N*s/m",
+    "drag": "s/m",
+    "x0": "m",
+    "v0": "m/s",
+    "offset": "s",
+    "scale": "",
+    "level": "m",
+}
 #: The contact laws a fit can use.
 LAWS = ("kelvin-voigt", "hunt-crossley")
 #: κ and k_r units per law.
@@ -61,8 +83,14 @@ def units(law: str) -> dict[str, str]:
     return {**UNITS, **LAW_UNITS[law]}
 
 
+def applies(name: str, observe: str) -> bool:
+    """Whether the entry `name` of z can be fitted to observations of kind `observe`."""
+    return name not in TRACE_ONLY or observe == "trace"
+
+
 def to_z(values: dict[str, float]) -> np.ndarray:
-    """Physical values (all six names) → z."""
+    """Physical values (every name of `PARAMETERS`; scale and level default to `NEUTRAL`) → z."""
+    values = {**NEUTRAL, **values}
     return np.array(
         [math.log(values[n]) if n in LOG_PARAMETERS else float(values[n]) for n in PARAMETERS], dtype=float
     )
@@ -129,7 +157,7 @@ class Problem(eqx.Module):
         if self.observe == "trace":
             ts = jnp.maximum(self.t_obs - z[5], 0.0) if self.shift_trace else self.t_obs
             sol = ju.simulate(ball, y0, ts[-1], ts=ts, outputs=("x",), **common)
-            pred = sol.ys["x"]
+            pred = z[7] + z[6] * sol.ys["x"]
         else:
             ts = jnp.stack([jnp.zeros(()), self.horizon])
             sol = ju.simulate(ball, y0, self.horizon, ts=ts, outputs=("x",), **common)
@@ -163,7 +191,7 @@ def evaluate_rows(problem: Problem, zs, skip) -> tuple[Array, Array]:
     """Residuals for each row of `zs`, in one compiled sequential loop.
 
     `problem` is a stack of data sets of one structure (`stack_problems`: every array
-    leaf with a leading file axis) and `zs` has shape (files, rows, 6). This is the
+    leaf with a leading file axis) and `zs` has shape (files, rows, len(PARAMETERS)). This is the
     package's jitted entry point: the fit calls it with a fixed number of rows (each
     file's point and its finite-difference neighbours), so only the first call compiles.
     Every leaf of `problem` is an array (`stack_problems`), so a plain `jax.jit` suffices,

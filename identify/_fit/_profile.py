@@ -1,4 +1,6 @@
-"""The profile likelihood of κ, and what it says about the fit's own minimum."""
+"""The profile likelihood of κ, what it says about the fit's own minimum, and whether it
+closes: a κ (hence t_c) that the profile leaves open on a side is not identifiable,
+whatever the Gauss–Newton interval says (that interval is a local, linear statement)."""
 
 from __future__ import annotations
 
@@ -8,6 +10,15 @@ import numpy as np
 
 from ._stages import Point, lm, row_weights
 from ._uncertainty import Z95
+
+
+def _row_variance(result, setup) -> float:
+    """The variance that turns the profile's costs into Δχ²: the fitted scatter of e
+    itself under the restitution-scatter model (its rows are unweighted log ratios),
+    else the noise used relative to the file's σ."""
+    if result.sigma_source == "restitution scatter":
+        return result.sigma**2
+    return (result.sigma / float(setup.sigmas[0])) ** 2
 
 
 def profile_kappa(setup, best, rows, result, opts, points: int = 13):
@@ -42,7 +53,7 @@ def profile_kappa(setup, best, rows, result, opts, points: int = 13):
                 cost = 0.5 * float(np.sum((weights * r) ** 2)) if ok else math.inf
                 failed[k] = not ok
             costs[k] = cost
-    s2 = (result.sigma / float(setup.sigmas[0])) ** 2
+    s2 = _row_variance(result, setup)
     delta = 2.0 * (costs - min(best.cost, float(np.min(costs)))) / s2
     threshold = Z95**2
     inside = np.flatnonzero((delta <= threshold) & ~failed)
@@ -78,7 +89,7 @@ PROFILE_SLACK = 0.1
 def check_profile_minimum(result, best: Point, setup) -> None:
     """A profile that finds a lower χ² than the fit: the fit is not at its minimum."""
     prof = result.profile
-    s2 = (result.sigma / float(setup.sigmas[0])) ** 2
+    s2 = _row_variance(result, setup)
     costs = prof.get("costs")
     if costs is None:
         return
@@ -95,3 +106,22 @@ def check_profile_minimum(result, best: Point, setup) -> None:
             f"the profile of kappa found a chi-square {lower:.3g} below the fit's at kappa = {k:.6g}: "
             "the fit stopped short of its minimum"
         )
+
+
+def profile_closes(profile: dict) -> str | None:
+    """None when the profile's 95% interval of κ is bounded on both sides; otherwise
+    why not, in words (a side left open, or a re-fit that failed next to the edge)."""
+    lo, hi = (float(v) for v in profile["ci95"])
+    if math.isnan(lo) or math.isnan(hi):
+        return "the profile likelihood of kappa could not be re-fitted next to an end of its interval"
+    open_sides = [side for side, end in (("below", lo), ("above", hi)) if end <= 0.0 or math.isinf(end)]
+    if open_sides:
+        grid = np.asarray(profile["kappa"])
+        reach = {"below": f"down to {grid[0]:.3g}", "above": f"up to {grid[-1]:.3g}"}
+        return (
+            "the profile likelihood of kappa stays within 95% "
+            + " and ".join(f"{reach[s]}" for s in open_sides)
+            + " (delta chi2 < 3.84): the data do not bound it "
+            + " or ".join(open_sides)
+        )
+    return None

@@ -186,8 +186,15 @@ def noise_statement(
     goodness: dict,
     times,
     height: float | None = None,
+    structure: dict | None = None,
 ) -> dict:
     """The stated σ against the residual scatter, in words and numbers.
+
+    `structure` (drop traces with at least two pairs of complete flights): `{"e_bounces",
+    "e_fit", "locked"}`, the flights' own per-bounce e, the fitted e and the p-value of
+    bounce-locked residuals. Then the residuals' structure decides, not a fixed cap
+    (`trace_structure`): an excess that the bounces' own e spread explains is scatter of
+    the ball; one that contradicts them is a misfit.
 
     **Returns:** `{"stated", "scatter", "unit", "verdict", "text"}`; verdict is one of
     `"estimated"` (no σ stated), `"consistent"`, `"understated"` (the residuals scatter
@@ -197,11 +204,16 @@ def noise_statement(
     """
     unit = "s" if d_observe == "impacts" else "m"
     show = (lambda v: f"{v * 1e3:.3g} ms") if unit == "s" else (lambda v: f"{v * 1e3:.3g} mm")
+    judged = trace_structure(structure) if d_observe == "trace" and structure is not None else None
     if not sigma_known:
         verdict = "estimated"
         text = f"no noise stated: sigma = residual scatter {show(scatter)}"
         limit = unstated_limit(d_observe, height)
-        if limit is not None and scatter > limit:
+        if judged is not None:
+            if not judged[0]:
+                verdict = "misfit"
+            text += "; " + judged[1]
+        elif limit is not None and scatter > limit:
             verdict = "misfit"
             text += (
                 f", far more than a {'position trace' if d_observe == 'trace' else 'height measurement'} "
@@ -218,13 +230,17 @@ def noise_statement(
             variation = scatter * math.sqrt(2.0) / float(np.mean(np.diff(times)))
             text += f": the bounce-to-bounce variation of e is about {variation:.2%}"
             plausible = variation <= MAX_E_VARIATION
+        elif judged is not None:
+            plausible = judged[0]
+            text += "; " + judged[1]
         else:
             plausible = scatter <= MAX_SCATTER_RATIO * stated
         if plausible:
             text += "; the intervals use the residual scatter"
         else:
             verdict = "misfit"
-            text += "; far more than bounce-to-bounce scatter explains: the model does not fit"
+            if judged is None:
+                text += "; far more than bounce-to-bounce scatter explains: the model does not fit"
     if sigma_known and _overstated(goodness):
         verdict = "overstated"
         text = (
@@ -233,6 +249,37 @@ def noise_statement(
             "the intervals use the stated noise and are too wide"
         )
     return {"stated": stated, "scatter": scatter, "unit": unit, "verdict": verdict, "text": text}
+
+
+def trace_structure(structure: dict) -> tuple[bool, str] | None:
+    """Whether a drop trace's excess residuals are the ball's bounce-to-bounce scatter:
+    (plausible, why), or None when fewer than two per-bounce e measure it.
+
+    The flights' own per-bounce e (closed form, `apex_ratios`) are the reference: a
+    fitted e off their median by more than max(0.03, 4 standard errors of a median) is a
+    wrong fit; a spread beyond `MAX_E_VARIATION` is no ball's. Otherwise the excess is
+    what the bounces differ by, whether or not the residuals are bounce-locked.
+    """
+    e_b = np.asarray(structure["e_bounces"], dtype=float)
+    if e_b.size < 2:
+        return None
+    median = float(np.median(e_b))
+    spread = float(np.std(e_b, ddof=1))
+    tolerance = max(0.03, 4.0 * 1.2533 * spread / math.sqrt(e_b.size))
+    e_fit = float(structure["e_fit"])
+    listed = f"{e_b.size} per-bounce e from the flights' apexes, median {median:.4f}"
+    if not abs(e_fit - median) <= tolerance:
+        return False, (
+            f"the fit's e = {e_fit:.4f} contradicts the {listed} (± {tolerance:.3f}): the model does not fit"
+        )
+    if spread > MAX_E_VARIATION * median:
+        return False, (
+            f"the {listed} vary by {spread / median:.1%}, more than a ball's bounce-to-bounce variation "
+            f"({MAX_E_VARIATION:.0%}): the model does not fit"
+        )
+    locked = structure.get("locked")
+    follows = "" if locked is None else f"; the residuals follow the bounces (p = {locked:.2g})"
+    return True, f"the bounces vary by about {spread / median:.2%} ({listed}){follows}"
 
 
 def unstated_limit(observe: str, height: float | None) -> float | None:

@@ -1,11 +1,12 @@
 """A fit's set-up: data sets in, the joint problem, its bounds and its start points out.
 
 One or several data sets are fitted together (`Layout`): κ, k_r (and the drag, when
-fitted) are shared; each file keeps its own release height x0, release speed v0 and
-clock offset. The start is the closed form of `identify._fit._initial` (e from successive
-rebound heights or flight times, t_c from the 0.5–2 ms prior, then (κ, k_r) from the
-law's inverse), per file for its nuisance values and from the median over files for
-the shared e.
+fitted) are shared; each file keeps its own release height x0, release speed v0, clock
+offset, and (traces) length scale and contact level. The start is the closed form of
+`identify._fit._initial` (e from successive rebound heights or flight times, t_c from
+the 0.5–2 ms prior, then (κ, k_r) from the law's inverse), per file for its nuisance
+values and from the median over files for the shared e; a drop trace's scale and level
+start from its flights' parabolas (`trace_calibration`).
 """
 
 from __future__ import annotations
@@ -17,12 +18,40 @@ import numpy as np
 
 from jaxunilat.internal import InputError
 
-from ._initial import CONTACT_TIME_GUESS, CONTACT_TIME_PRIOR, first_impact_time, initial_restitution
+from ._initial import (
+    CONTACT_TIME_GUESS,
+    CONTACT_TIME_PRIOR,
+    first_impact_time,
+    initial_restitution,
+    trace_calibration,
+)
 from ._joint import JointEvaluator, Layout, make_groups
 from ._kelvin_voigt import parameters_from_restitution
-from ._problem import LOG_PARAMETERS, PARAMETERS, default_max_steps, make_problem, to_z
+from ._problem import (
+    LOG_PARAMETERS,
+    NEUTRAL,
+    PARAMETERS,
+    TRACE_ONLY,
+    applies,
+    default_max_steps,
+    make_problem,
+    to_z,
+)
+from ._trace_flights import trace_release
 
-_FD_STEP = {"kappa": 1e-4, "k_r": 1e-4, "drag": 1e-4, "x0": 1e-6, "v0": 1e-5, "offset": 1e-6}
+#: Central-difference steps (scale and level have closed-form columns: unused there).
+_FD_STEP = {
+    "kappa": 1e-4,
+    "k_r": 1e-4,
+    "drag": 1e-4,
+    "x0": 1e-6,
+    "v0": 1e-5,
+    "offset": 1e-6,
+    "scale": 1e-6,
+    "level": 1e-6,
+}
+#: A trace's scale within a factor 2 (a ruler 10–20% off is the expected error), its level
+#: within ±0.5 m of the file's floor (a level set by hand is off by pixels, millimetres).
 DEFAULT_BOUNDS = {
     "kappa": (1.0, 1e12),
     "k_r": (1e-12, 1e4),
@@ -30,6 +59,8 @@ DEFAULT_BOUNDS = {
     "x0": (-1e3, 1e3),
     "v0": (-1e3, 1e3),
     "offset": (-1e4, 1e4),
+    "scale": (0.5, 2.0),
+    "level": (-0.5, 0.5),
 }
 #: The residual scale a fit starts from when the files state no noise: a real onset's
 #: scatter (s) and a video's or a ruler's resolution (m).
@@ -110,7 +141,16 @@ def _file_values(d, initial: dict, nuisance: tuple[str, ...]) -> tuple[dict, flo
         x0=initial.get("x0", d.x0),
         v0=initial.get("v0", d.v0),
         offset=initial.get("offset", 0.0),
+        **_calibration(d, initial, nuisance),
     )
+    if d.observe == "trace" and d.scene == "drop" and "offset" in nuisance and "offset" not in initial:
+        values.update(_release(d, values, fit_x0="x0" in nuisance and "x0" not in initial))
+    if values["scale"] != 1.0 or values["level"] != 0.0:
+        # The file's release state is in the data's units; the model's is physical.
+        if "x0" in nuisance and "x0" not in initial:
+            values["x0"] = (values["x0"] - values["level"]) / values["scale"]
+        if "v0" in nuisance and "v0" not in initial:
+            values["v0"] = values["v0"] / values["scale"]
     horizon = None
     g = d.gravity
     if d.observe == "impacts":
@@ -127,6 +167,42 @@ def _file_values(d, initial: dict, nuisance: tuple[str, ...]) -> tuple[dict, flo
         if d.t is not None:
             horizon = max(horizon, float(d.t[-1]) + 0.6 * float(flights[-1]) + 0.05)
     return values, horizon
+
+
+def _release(d, values: dict, *, fit_x0: bool) -> dict:
+    """A drop trace's first-guess release instant (`offset`, s) and, when fitted, height
+    (x0, data units) from its first fall (`trace_release`); {} where it has none."""
+    noise = d.noise if d.noise is not None else NOMINAL_NOISE["trace"]
+    found = trace_release(d.t, d.x, curvature=d.gravity * values["scale"], noise=noise)
+    if found is None:
+        return {}
+    offset, height = found
+    return {"offset": offset, "x0": height} if fit_x0 else {"offset": offset}
+
+
+def _calibration(d, initial: dict, nuisance: tuple[str, ...]) -> dict:
+    """A file's first-guess scale and level: `NEUTRAL` except for a trace's (the given
+    initial values, or for a drop trace whose scale or level is fitted, the closed form)."""
+    if d.observe != "trace":
+        return dict(NEUTRAL)
+    out = {n: float(initial.get(n, NEUTRAL[n])) for n in TRACE_ONLY}
+    guess = [n for n in TRACE_ONLY if n in _free_names(d, nuisance, ()) and n not in initial]
+    if guess and d.scene == "drop":
+        found = trace_calibration(d.t, d.x, d.gravity)
+        if found is not None:
+            out.update({n: v for n, v in zip(TRACE_ONLY, found, strict=True) if n in guess})
+    return out
+
+
+def _free_names(d, nuisance: tuple[str, ...], freeze: tuple[str, ...]) -> tuple[str, ...]:
+    """The nuisance entries fitted for data set d: those of `nuisance` that apply to its
+    observations, not frozen, and (scale, level) not stated as measured by the file."""
+    measured = tuple(getattr(d, "measured", ()) or ())
+    return tuple(
+        n
+        for n in nuisance
+        if n not in freeze and applies(n, d.observe) and not (n in TRACE_ONLY and n in measured)
+    )
 
 
 def _typical_speed(datasets) -> float:
@@ -151,16 +227,19 @@ def build(datasets, *, law, nuisance, freeze, initial, bounds, tol) -> Setup:
     problems = _padded_problems(
         datasets, per_file, rows, law=law, has_drag=has_drag, sigmas=sigmas, tol=tol, shift_trace=shift_trace
     )
+    fitted = [_free_names(d, nuisance, freeze) for d in datasets]
     free = [
         j
-        for j, (name, _) in enumerate(layout.names())
-        if (name in ("kappa", "k_r") or name in nuisance) and name not in freeze
+        for j, (name, f) in enumerate(layout.names())
+        if (name in ("kappa", "k_r") and name not in freeze) or name in fitted[f or 0]
     ]
     bounds = {**DEFAULT_BOUNDS, **LAW_BOUNDS.get(law, {}), **bounds}
     lo6, hi6 = to_z({n: bounds[n][0] for n in PARAMETERS}), to_z({n: bounds[n][1] for n in PARAMETERS})
-    names = [n for n, _ in layout.names()]
-    lo = np.array([lo6[PARAMETERS.index(n)] for n in names])
-    hi = np.array([hi6[PARAMETERS.index(n)] for n in names])
+    lo = np.array([lo6[PARAMETERS.index(n)] for n, _ in layout.names()])
+    hi = np.array([hi6[PARAMETERS.index(n)] for n, _ in layout.names()])
+    for j, (name, f) in enumerate(layout.names()):
+        if f is not None and not applies(name, datasets[f].observe):
+            lo[j] = hi[j] = NEUTRAL[name]  # impact onsets and apexes: no scale or level
     steps = np.array(
         [
             _FD_STEP[n] * (1.0 if n in LOG_PARAMETERS else max(1.0, abs(per_file[f or 0][0][n])))

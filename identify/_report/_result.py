@@ -12,7 +12,18 @@ import numpy as np
 
 import jaxunilat as ju
 
-from .._fit._problem import LOG_PARAMETERS, PARAMETERS, from_z, units
+from .._fit._problem import LOG_PARAMETERS, NEUTRAL, PARAMETERS, TRACE_ONLY, applies, from_z, units
+
+#: Each file's own entries (the joint layout's local ones), their SI unit, and how the
+#: [[Files]] table shows them (scale from SI, unit).
+_LOCAL = (
+    ("x0", "m", 1e3, "mm"),
+    ("v0", "m/s", 1.0, "m/s"),
+    ("offset", "s", 1e3, "ms"),
+    ("scale", "", 1.0, ""),
+    ("level", "m", 1e3, "mm"),
+)
+_LOCAL_NAMES = tuple(name for name, *_ in _LOCAL)
 
 #: A 95% interval whose ends lie more than this many decades apart bounds nothing useful.
 SPAN_DECADES = 3.0
@@ -37,13 +48,17 @@ class FitResult:
     **Fields:**
 
     - `parameters`: `{name: {"value", "stderr", "ci95"}}` for kappa (N/m), k_r (N·s/m),
-      drag (s/m), x0 (m), v0 (m/s) and offset (s), in SI units; a parameter that was
-      not fitted has stderr 0 (and the file's or the initial value).
+      drag (s/m), x0 (m), v0 (m/s), offset (s), and a trace's scale (data per model
+      length) and level (m), in SI units; a parameter that was not fitted has stderr 0
+      (and the file's or the initial value).
     - `derived`: the same for `restitution` (e, Kelvin–Voigt, [K90 Eq. 3.1]) and
       `contact_time` (t_c = π/ω_d, s).
     - `identifiable`: `{kappa, k_r, restitution, contact_time}` → bool: a finite 95%
-      CI whose half-width is at most `rel_halfwidth` of the value, and a fit that
-      passes the χ² test of `goodness` (all False when it fails).
+      CI whose half-width is at most `rel_halfwidth` of the value, in a converged fit
+      that its data do not contradict. κ, k_r and t_c also need a fit consistent with
+      its noise (the χ² test of `goodness`) and a profile likelihood of κ that closes on
+      both sides (`profile`); `withheld` says why one of them is not, where its
+      interval alone would have passed.
     - `goodness`: `{"reduced_chi2", "dof", "p_value", "consistent"}`, the χ² test of
       the fit against the file's noise σ (p_value and consistent are None when σ was
       estimated from the residuals).
@@ -57,7 +72,11 @@ class FitResult:
       `chi2` is theirs and `sigma` is the relative bounce-to-bounce variation of e.
     - `residuals`: prediction − data, in the data's units.
     - `starts`: the cost and convergence of every start; `initial`: the closed-form
-      start; `profile`: the profile likelihood of κ (when asked for).
+      start; `profile`: the profile likelihood of κ (asked for, or computed to confirm
+      an identifiable κ).
+    - `withheld`: `{name: reason}` for each quantity whose own interval would pass but
+      that is not identifiable for a reason of the whole fit (e.g. an inconsistent fit,
+      a profile of κ open on one side).
     - `law`, `laws`, `law_choice`: the contact law, and with `law="auto"` each law's
       χ², AIC, BIC and estimates on the rows both used (`criteria`).
     - `datasets`: one dict per file (rows, used, held out, `outliers`, `missed` bounces,
@@ -110,6 +129,14 @@ class FitResult:
     datasets_data: list = dataclasses.field(default_factory=list)
     notes: list = dataclasses.field(default_factory=list)
     contradictions: list = dataclasses.field(default_factory=list)
+    withheld: dict = dataclasses.field(default_factory=dict)
+
+    def withhold(self, names, reason: str) -> None:
+        """Mark `names` not identifiable, giving `reason` where their interval alone passed."""
+        for name in names:
+            if self.identifiable.get(name):
+                self.identifiable[name] = False
+                self.withheld.setdefault(name, reason)
 
     def criteria(self, used: np.ndarray | None = None) -> dict:
         """χ², AIC and BIC of the fit over the `used` rows (default: its fitted rows).
@@ -148,7 +175,7 @@ class FitResult:
         return self.parameters["k_r"]["value"]
 
     def values(self) -> dict[str, float]:
-        """All six parameter values, SI units."""
+        """Every parameter's value (`PARAMETERS`), SI units."""
         return from_z(self.z)
 
     def kappa_k_r_correlation(self) -> float:
@@ -197,10 +224,13 @@ class FitResult:
             "parameters": {n: clean(self.parameters[n]) for n in ("kappa", "k_r")},
             "derived": {n: clean(self.derived[n]) for n in ("restitution", "contact_time")},
             "identifiable": {n: bool(v) for n, v in self.identifiable.items()},
+            "withheld": dict(self.withheld),
             "correlation": [[1.0, _finite_or_none(k)], [_finite_or_none(k), 1.0]],
             "converged": bool(self.converged),
             "nuisance": {
-                n: clean(self.parameters[n]) for n in PARAMETERS[2:] if n in self.free or n != "offset"
+                n: clean(self.parameters[n])
+                for n in PARAMETERS[2:]
+                if n in self.free or (n != "offset" and applies(n, self.data.observe))
             },
             "fitted": list(self.free),
             "correlation_all": {
@@ -271,8 +301,9 @@ class FitResult:
 
         Keys: `name` (the file's base name), `data` (its path or None), `observe`, `rows`,
         `used` (fitted rows), `held_out`, `outliers` and `missed` (counts); `x0` (m),
-        `v0` (m/s) and `offset` (s), each `{"value", "stderr", "unit", "status"}` with
-        status "fitted" (stderr from the joint covariance) or "fixed" (stderr None);
+        `v0` (m/s), `offset` (s), `scale` (dimensionless) and `level` (m; both (1, 0) for
+        all but traces), each `{"value", "stderr", "unit", "status"}` with status
+        "fitted" (stderr from the joint covariance) or "fixed" (stderr None);
         `e_alone`: the file's own restitution `{"value", "stderr", "ci95"}` (κ, k_r fitted
         to this file alone; for a one-file fit, the fit's e); `rms`: the residual rms of
         the used rows `{"value", "unit"}` in SI units (s for onsets, m otherwise) and
@@ -296,8 +327,15 @@ class FitResult:
             scale, shown = residual_unit(observe)
             si = "s" if observe == "impacts" else "m"
             values = {}
-            for name, unit in (("x0", "m"), ("v0", "m/s"), ("offset", "s")):
+            for name, unit, *_ in _LOCAL:
                 own = e["parameters"].get(name)
+                if own is None and name in TRACE_ONLY and name in self.free and observe == "trace":
+                    if name not in (getattr(d, "measured", ()) or ()):
+                        # File 0's entry is the headline view; a per-file summary that
+                        # lists only x0, v0 and offset leaves the other files' s.e. out.
+                        own = (
+                            self.parameters[name] if f == 0 else {"value": per_file[f][name], "stderr": None}
+                        )
                 if own is not None:
                     values[name] = {"value": own["value"], "stderr": own["stderr"], "unit": unit,
                                     "status": "fitted"}  # fmt: skip
@@ -331,7 +369,8 @@ class FitResult:
         return out
 
     def _per_file_values(self, n_files: int) -> list[dict]:
-        """Each file's x0, v0 and offset as used by the fit (fitted or held), SI units."""
+        """Each file's own entries (x0, v0, offset, scale, level) as used by the fit (fitted
+        or held), SI units."""
         if self.joint_z is not None:
             from .._fit._joint import Layout
 
@@ -342,7 +381,7 @@ class FitResult:
         if n_files == 1:
             return [from_z(self.z)]
         datasets = self.datasets_data or [self.data]
-        return [{"x0": float(d.x0), "v0": float(d.v0), "offset": 0.0} for d in datasets]
+        return [{"x0": float(d.x0), "v0": float(d.v0), "offset": 0.0, **NEUTRAL} for d in datasets]
 
     def report(self) -> str:
         """A plain-text report in the style of lmfit's `fit_report`."""
@@ -441,11 +480,13 @@ class FitResult:
         per_file = []
         for name in PARAMETERS:
             entry = self.parameters[name]
-            if several and name in ("x0", "v0", "offset"):
-                per_file.append(name)
+            if several and name in _LOCAL_NAMES:
+                if name not in TRACE_ONLY or any(f.observe == "trace" for f in self.datasets_data):
+                    per_file.append(name)
                 continue
             if name not in self.free:
-                if name in ("kappa", "k_r") or (name == "drag" and d.drag > 0) or name in ("x0", "v0"):
+                held = name in ("kappa", "k_r", "x0", "v0") or (name in TRACE_ONLY and d.observe == "trace")
+                if held or (name == "drag" and d.drag > 0):
                     lines.append(f"    {name:<7}= {entry['value']:<12.6g} (fixed)  {unit[name]}")
                 continue
             lines.append("    " + _format_entry(name, entry, unit[name], self.converged, self._bound(name)))
@@ -499,6 +540,8 @@ class FitResult:
             entry = self.parameters.get(name) or self.derived.get(name)
             b = self._bound(name)
             says = _halfwidth(entry) if b["kind"] == "interval" else f"  ({b['text']})"
+            if name in self.withheld:
+                says = f"  ({self.withheld[name]})"
             lines.append(f"    {label:<7}: {'yes' if self.identifiable[name] else 'NO':<4}" + says)
         lines.append("[[Correlations]] (of the fitted entries; logs for kappa, k_r, drag)")
         names, corr = self.free, np.asarray(self.correlation)
@@ -540,7 +583,7 @@ class FitResult:
         # A column for every per-file value that is fitted or differs between files.
         columns = []
         if several:
-            for name, s, u in (("x0", 1e3, "mm"), ("v0", 1.0, "m/s"), ("offset", 1e3, "ms")):
+            for name, _, s, u in _LOCAL:
                 if (
                     any(f[name]["status"] == "fitted" for f in table)
                     or len({f[name]["value"] for f in table}) > 1
@@ -549,7 +592,7 @@ class FitResult:
         width = max([len(f["name"]) for f in table] + [4]) if several else 28
         width = min(width, 32)
         header = f"    {'file':<{width}} {'rows':>5} {'used':>5} {'held':>5} {'outliers':>8} {'rms (' + unit + ')':>9}"
-        header += "".join(f"  {name + ' (' + u + ')':<20}" for name, _, u in columns)
+        header += "".join(f"  {name + (' (' + u + ')' if u else ''):<20}" for name, _, u in columns)
         lines.append(header + ("  e alone (t_c prior)" if several else ""))
         for f in table:
             rms = f["rms_shown"]["value"]
@@ -557,7 +600,10 @@ class FitResult:
             name = f["name"] if len(f["name"]) <= width else f["name"][: width - 3] + "..."
             row = f"    {name:<{width}} {f['rows']:>5} {f['used']:>5} {f['held_out']:>5} {f['outliers']:>8} {rms}"
             for col, s, _ in columns:
-                row += f"  {_pm(f[col]['value'], f[col]['stderr'], s):<20}"
+                shown = _pm(f[col]["value"], f[col]["stderr"], s)
+                if f[col]["status"] == "fitted" and f[col]["stderr"] is None:
+                    shown = f"{f[col]['value'] * s:.6g} (fitted)"
+                row += f"  {shown:<20}"
             alone = f["e_alone"]
             if several and alone is not None:
                 row += f"  {_pm(alone['value'], alone['stderr'], 1.0)}"

@@ -16,11 +16,22 @@ import numpy as np
 
 from .._data._format import plausibility_notes
 from .._fit._alone import alone_restitution
+from .._fit._by_bounce import (
+    P_BOUNCE_LOCKED,
+    bounce_locked,
+    by_bounce,
+    restitution_spread,
+    trace_clusters,
+    widen_by_bounce,
+)
 from .._fit._derived import law_derived, view
 from .._fit._problem import PARAMETERS
 from .._fit._robust import missed_bounces, noise_statement, scatter_statement
 from .._fit._uncertainty import covariance, goodness_of_fit, summarize
 from ._result import FitResult
+
+#: The quantities that carry the contact's time scale: κ, k_r and t_c (e does not need it).
+CONTACT = ("kappa", "k_r", "contact_time")
 
 
 def _file_entries(setup, z, cov, rows, *, r_data, sigma_used, best_alone):
@@ -33,7 +44,7 @@ def _file_entries(setup, z, cov, rows, *, r_data, sigma_used, best_alone):
         own = {}
         z6, cov6, free6 = view(setup, z, cov, f)
         params = summarize(z6, cov6, free6, float(d.mass), derived=law_derived(setup))[0]
-        for name in ("x0", "v0", "offset"):
+        for name in setup.layout.local:
             if setup.layout.index[f, PARAMETERS.index(name)] in setup.free:
                 own[name] = params[name]
         times = setup.times[f]
@@ -83,11 +94,29 @@ def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale, onset
     understated = setup.sigma_known and goodness["consistent"] is False
     estimate = scatter_model or not setup.sigma_known or understated
     cov, s2 = covariance(jac[keep], r_fit[keep], sigma_known=not estimate)
+    locked = None
+    if not scatter_model:
+        clusters, times = (a[keep] for a in trace_clusters(setup, rows, r_data))
+        if np.any(clusters >= 0):
+            locked = bounce_locked(r_fit[keep], clusters, times)
+            if locked < P_BOUNCE_LOCKED:
+                cov = by_bounce(cov, jac[keep], r_fit[keep], clusters)
     z6, cov6, free6 = view(setup, best.z, cov)
     d0 = setup.datasets[0]
     parameters, derived, identifiable, corr, names = summarize(
         z6, cov6, free6, float(d0.mass), rel_halfwidth=opts.rel_halfwidth, derived=law_derived(setup)
     )
+    bounce_notes, structure = [], None
+    if locked is not None:
+        e_bounces = restitution_spread(setup, best.z)
+        structure = {"e_bounces": e_bounces, "e_fit": derived["restitution"]["value"], "locked": locked}
+        # Only where the data show the bounces differ (bounce-locked residuals, or more
+        # scatter than the stated noise): else the per-bounce values differ by noise alone,
+        # and the fit of every frame is the sharper estimate of a constant e.
+        if locked < P_BOUNCE_LOCKED or goodness["consistent"] is False:
+            derived, identifiable, bounce_notes = _e_by_bounce(
+                e_bounces, derived, identifiable, opts, locked=locked < P_BOUNCE_LOCKED
+            )
     onset_scatter = math.sqrt(chi2_data / max(int(keep.sum()) - p, 1)) * float(np.median(setup.sigmas))
     if scatter_model:
         sigma_used = np.full(len(setup.sigmas), math.sqrt(s2))
@@ -97,7 +126,7 @@ def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale, onset
         noise = noise_statement(
             d0.observe, sigma_known=setup.sigma_known, stated=float(setup.sigmas[0]),
             scatter=onset_scatter if setup.sigma_known else float(sigma_used[0]), goodness=goodness,
-            times=setup.times[0], height=_height(setup),
+            times=setup.times[0], height=_height(setup), structure=structure,
         )  # fmt: skip
     at_bound = [
         "/".join(str(x) for x in setup.layout.names()[j] if x is not None)
@@ -108,6 +137,17 @@ def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale, onset
     converged = bool(best.converged and math.isfinite(best.cost) and not at_bound)
     if not converged or noise["verdict"] == "misfit":
         identifiable = {name: False for name in identifiable}
+    withheld = {}
+    if goodness["consistent"] is False:
+        # The contact's own time scale is the first thing a wrong model or a wrong fixed
+        # value (x0, drag, a calibration) bends to fit: never claim it from such a fit.
+        why = (
+            f"the fit is inconsistent with its noise (reduced chi-square {goodness['reduced_chi2']:.3g}): "
+            "its contact time is not trusted"
+        )
+        for name in CONTACT:
+            if identifiable[name]:
+                identifiable[name], withheld[name] = False, why
     several = setup.layout.n_files > 1
     alone = alone_restitution(setup, best, rows, opts) if several and not opts.defer_alone else None
     row_sigma = setup.per_row(setup.sigmas)
@@ -158,10 +198,58 @@ def summarize_fit(setup, best, rows, opts, *, runs, initial, robust_scale, onset
         n_parameters=p,
         joint_z=np.asarray(best.z),
         datasets_data=list(setup.datasets),
-        notes=[note for d in setup.datasets for note in plausibility_notes(d)],
+        notes=[note for d in setup.datasets for note in plausibility_notes(d)]
+        + _locked_note(locked)
+        + bounce_notes,
         row_sigma=row_sigma,
         sigma_known=setup.sigma_known,
+        withheld=withheld,
     )
+
+
+def _e_by_bounce(e_bounces, derived, identifiable, opts, *, locked: bool):
+    """e's interval from the spread of the drop traces' own per-bounce e, where that is
+    wider: (derived, identifiable, notes). With bounce-locked residuals and fewer than two
+    per-bounce values, e is not identifiable."""
+    wide = widen_by_bounce(derived["restitution"], e_bounces)
+    derived, identifiable = dict(derived), dict(identifiable)
+    if wide is None and not locked:
+        return derived, identifiable, []
+    if wide is None:
+        identifiable["restitution"] = False
+        return (
+            derived,
+            identifiable,
+            [
+                f"e: the bounces differ, and {e_bounces.size} pair(s) of complete flights cannot measure by how "
+                "much: e's interval is not trusted"
+            ],
+        )
+    derived["restitution"] = wide
+    lo, hi = wide["ci95"]
+    identifiable["restitution"] = bool(
+        identifiable["restitution"] and (hi - lo) / 2 <= opts.rel_halfwidth * wide["value"]
+    )
+    return (
+        derived,
+        identifiable,
+        [
+            f"e's 95% interval is at least what its {e_bounces.size} bounces give (per-bounce e from successive apex "
+            f"heights: {', '.join(f'{v:.3f}' for v in e_bounces[:12])}{', ...' if e_bounces.size > 12 else ''}; "
+            "Student-t with bounces - 1 degrees of freedom)"
+        ],
+    )
+
+
+def _locked_note(p: float | None) -> list[str]:
+    """The report's note when a trace's residuals are locked to its bounces."""
+    if p is None or p >= P_BOUNCE_LOCKED:
+        return []
+    return [
+        f"the trace's residuals follow its bounces (each flight's residuals have their own level and slope, "
+        f"p = {p:.2g} for independent noise): the bounces differ, so the intervals count bounces, not frames "
+        "(cluster-robust covariance by flight, Student-t with flights - 1 degrees of freedom)"
+    ]
 
 
 def _height(setup) -> float | None:
