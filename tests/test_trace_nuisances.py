@@ -59,7 +59,7 @@ def test_free_scale_and_level_recover_the_calibration_and_e_frozen_ones_bias_it(
     assert free.goodness["consistent"] is True
 
     # Held at (1, 0), the same frames cannot be fitted: the χ² test fails, e misses the
-    # truth by more than the free fit's 95% half-width, and the contact time follows the
+    # truth by far more than the free fit does, and the contact time follows the
     # hand-set calibration (κ runs off: t_c a twentieth of the true 1.29 ms).
     held = identify.fit(data, starts=1, freeze=("scale", "level"))
     print("\n" + held.report())
@@ -69,8 +69,8 @@ def test_free_scale_and_level_recover_the_calibration_and_e_frozen_ones_bias_it(
     bias = held.derived["restitution"]["value"] - E_TRUE
     print(f"e: free {e['value']:.5f} +/- {e['stderr']:.5f}, held {held.derived['restitution']['value']:.5f}, "
           f"truth {E_TRUE:.5f}, bias {bias:+.5f}; t_c held {held.derived['contact_time']['value'] * 1e3:.3g} ms")  # fmt: skip
-    assert abs(bias) > 1.96 * e["stderr"]
-    assert abs(bias) > 2.0 * abs(e["value"] - E_TRUE)
+    # (e's interval counts the trace's few bounces, so it is no yardstick for a bias here.)
+    assert abs(bias) > 5.0 * abs(e["value"] - E_TRUE)
     assert held.derived["contact_time"]["value"] < 0.3e-3
 
 
