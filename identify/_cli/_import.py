@@ -4,6 +4,7 @@
                      [--air-density RHO] [--x0 H] [--v0 V] [--noise S] [--plot PNG]
                      [--threshold K] [--dead-time S] [--min-gap S]
     jaxunilat import phyphox SOURCE.csv|.xlsx --mass KG --diameter M --out DATA.csv [...]
+    jaxunilat import video CLIP.mp4 --ball NAME --out DATA.csv [--color C] [--roi X0,Y0,X1,Y1] [--plot PNG]
     jaxunilat import video SOURCE.csv --ball NAME --out DATA.csv [--column NAME] [--scale F] [...]
 
 The ball must be stated: `--ball NAME` (a preset of `identify.BALLS`), or `--mass`
@@ -39,15 +40,15 @@ def _source_kind(sources, kind: str, *, source_help: str, x0_help: str, noise_he
     p.add_argument("--v0", type=float, help="velocity at t = 0, m/s (default 0: released from rest)")
     p.add_argument("--noise", type=float, metavar="S", help=noise_help)
     p.add_argument("--plot", metavar="PNG", help="draw what was imported (kept and rejected onsets)")
-    if kind != "video":
-        p.add_argument(
-            "--force",
-            action="store_true",
-            help="write the data file even when the onsets are not those of one ball's drop test (intervals "
-            "that do not decay, a broken ratio chain, a chain kept from a minority of the onsets, a flight longer "
-            "than the ball allows, an estimated release higher than any drop test's); by default such an import is "
-            "refused with exit 3",
-        )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="write the data file even when the recording is not one ball's drop test (onsets: intervals "
+        "that do not decay, a broken ratio chain, a chain kept from a minority of the onsets, a flight longer "
+        "than the ball allows, an estimated release higher than any drop test's; a clip: a track that does not "
+        "follow free flight, or a scale that disagrees with the ball's diameter); by default such an import is "
+        "refused with exit 3",
+    )
     p.set_defaults(func=_run_import)
     return p
 
@@ -162,13 +163,25 @@ def register(commands) -> None:
     v = _source_kind(
         sources,
         "video",
-        source_help="the tracking table, CSV (only read)",
-        x0_help="height at t = 0, m (default: the first sample's height)",
+        source_help="a video clip (mp4, mov, avi, mkv, webm; needs the video extra) or a tracking table, CSV "
+        "(only read)",
+        x0_help="tables: height at t = 0, m (default: the first sample's height); a clip finds its release",
         noise_help="position standard deviation, m (default: none, so a fit estimates it from its residuals)",
-        help="a height trace from a video-tracking table (Tracker and similar)",
-        description="Read a video-tracking CSV: a header row with units (t (s), y (cm)), possibly after a "
-        "preamble line such as Tracker's 'mass A'. Writes observe = trace with t (s, 0 = the first tracked "
-        "frame: video time zero is the first frame, not the release) and x (m).",
+        help="a height trace from a phone video (tracked automatically) or a video-tracking table",
+        description="A video clip: the ball is tracked automatically (background subtraction, then the path "
+        "that follows free flight), repeated frames are left out, the length scale comes from gravity (and is "
+        "checked against the ball's diameter), the contact level from where successive flights meet, and held "
+        "frames before the release are left out; the data file names x0, v0, scale and level as estimated, so "
+        'a fit frees them. Needs PyAV: pip install "jaxunilat[video]". A tracking CSV: a header row with '
+        "units (t (s), y (cm)), possibly after a preamble line such as Tracker's 'mass A'. Writes observe = "
+        "trace with t (s, 0 = the first kept frame, not the release) and x (m).",
+    )
+    v.add_argument("--color", metavar="C", help="clips: the ball's colour, a hint (a name, #rrggbb or r,g,b)")
+    v.add_argument(
+        "--roi",
+        metavar="X0,Y0,X1,Y1",
+        type=_roi,
+        help="clips: search for the ball only in this rectangle, pixels of the picture as displayed (y down)",
     )
     v.add_argument(
         "--column", metavar="NAME", help="the height column (default: y if present, else the second column)"
@@ -180,6 +193,20 @@ def register(commands) -> None:
         help="metres per unit of the height column (default: from the header unit m, cm or mm; required if "
         "the header has none)",
     )
+
+
+def _roi(text: str) -> tuple[int, int, int, int]:
+    """`--roi X0,Y0,X1,Y1` as four integers (pixels)."""
+    import argparse
+
+    parts = text.split(",")
+    try:
+        values = tuple(int(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) != 4:
+        raise argparse.ArgumentTypeError(f"{text!r} is not four whole numbers X0,Y0,X1,Y1 (pixels)")
+    return values
 
 
 #: Exit status of an import refused as not one bouncing ball's (nothing is written).
@@ -204,9 +231,37 @@ def _plot_import(result, args) -> None:
 
     from ..plot import plot_detection, plot_table_import
 
+    if _is_clip(result):
+        _plot_clip(result.detection, args.plot)
+        return
     plot = plot_detection if args.source_kind == "wav" else plot_table_import
     save_figure(plot(result), args.plot)
     print(f"{'wrote':<10} {args.plot}")
+
+
+def _is_clip(result) -> bool:
+    return result.importer == "video" and result.detection is not None
+
+
+def sheet_path(plot: str) -> str:
+    """Where `--plot F.png` puts a clip's contact sheet: F-frames.png beside it."""
+    import os
+
+    stem, ext = os.path.splitext(plot)
+    return f"{stem}-frames{ext or '.png'}"
+
+
+def _plot_clip(trace, plot: str) -> None:
+    """A clip's trace figure into `plot` and its contact sheet (the frames with the track
+    drawn on them) beside it."""
+    from jaxunilat.plot import save_figure
+
+    from .._report._plot_video import plot_video_contact_sheet, plot_video_trace
+
+    save_figure(plot_video_trace(trace), plot)
+    print(f"{'wrote':<10} {plot}")
+    save_figure(plot_video_contact_sheet(trace), sheet_path(plot))
+    print(f"{'wrote':<10} {sheet_path(plot)}")
 
 
 def _refused(err, args) -> int:
@@ -245,7 +300,10 @@ def _imported(args):
                 return import_wav(args.source, force=args.force, **_detector_options(args), **common)
             if args.source_kind == "phyphox":
                 return import_phyphox(args.source, force=args.force, **common)
-            return import_video(args.source, column=args.column, scale=args.scale, **common)
+            return import_video(
+                args.source, column=args.column, scale=args.scale, color=args.color, roi=args.roi,
+                force=args.force, **common,
+            )  # fmt: skip
         except ImplausibleRecording as err:
             return err
 
@@ -261,13 +319,19 @@ def _run_import(args) -> int:
     )
 
     from .. import ImplausibleRecording, ball_spec
+    from .._data._video_decode import is_video_file
 
     with input_errors():
         try:  # the ball first: without it nothing can be written
             ball_spec(**_ball_options(args), cli=True)
         except ValueError as err:
             raise InputError(f"import {args.source_kind}: {err}") from None
-        check_output_paths(("--out", args.out), ("--plot", args.plot), inputs=(("SOURCE", args.source),))
+        clip = args.source_kind == "video" and is_video_file(args.source)
+        sheet = sheet_path(args.plot) if args.plot is not None and clip else None
+        check_output_paths(
+            ("--out", args.out), ("--plot", args.plot), ("--plot (its contact sheet)", sheet),
+            inputs=(("SOURCE", args.source),),
+        )  # fmt: skip
     check_plot_format(args.plot)
     result = _imported(args)
     if isinstance(result, ImplausibleRecording):

@@ -943,8 +943,16 @@ def import_video(
     x0: float | None = None,
     v0: float | None = None,
     noise: float | None = None,
+    color=None,
+    roi=None,
+    force: bool = False,
 ) -> ImportResult:
-    """A height trace from a video-tracking table (Tracker and similar), as a trace data set.
+    """A height trace from a video clip (mp4, mov, avi, mkv, webm: `import_video_clip`, the
+    `video` extra) or from a video-tracking table (Tracker and similar), as a trace data set.
+
+    A clip is tracked automatically (`color`, `roi`: hints; `force`: keep a clip whose
+    track is implausible); the rest of this docstring is about tables, for which `color`,
+    `roi` and `force` do not apply.
 
     The table has a header row naming the columns with units (`t (s)`, `y (cm)`),
     possibly after a preamble line (Tracker writes the object's name, e.g. `mass A`).
@@ -966,9 +974,17 @@ def import_video(
     """
     from jaxunilat.internal import check_range
 
-    spec = check_options(
-        ball=ball, mass=mass, diameter=diameter, drag=drag, air_density=air_density, x0=x0, v0=v0, noise=noise
-    )
+    from ._video_decode import is_video_file
+
+    ball_keywords = dict(ball=ball, mass=mass, diameter=diameter, drag=drag, air_density=air_density)
+    if is_video_file(path):
+        _clip_only_options(column=column, scale=scale, x0=x0, v0=v0)
+        from ._video_trace import import_video_clip
+
+        return import_video_clip(path, **ball_keywords, noise=noise, color=color, roi=roi, force=force)
+    if color is not None or roi is not None:
+        raise InputError("color and roi apply to a video clip; this source is a tracking table")
+    spec = check_options(**ball_keywords, x0=x0, v0=v0, noise=noise)
     check_range("scale", scale, lo=0.0, lo_open=True, unit="m per unit", allow_none=True)
     table = read_table(path)
     name = os.fspath(path)
@@ -1011,6 +1027,17 @@ def import_video(
     return _table_result(
         table, ds, importer="video", source=name, accepted=t_a, rejected=rejected, notes=notes
     )
+
+
+def _clip_only_options(**given) -> None:
+    """A clip's heights and release come from its own frames: table options are refused."""
+    for name, value in given.items():
+        if value is not None:
+            flag = "--" + name
+            raise InputError(
+                f"{flag} = {value!r} applies to a tracking table, not to a video clip (the clip's scale comes "
+                "from gravity and the ball's diameter, its release from the frames)"
+            )
 
 
 def _video_columns(table: Table, column: str | None, notes: list[str]) -> tuple[int, int]:

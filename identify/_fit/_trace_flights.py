@@ -17,8 +17,9 @@ import math
 
 import numpy as np
 
-#: A free flight needs this many samples away from its contacts for its parabola.
-MIN_FLIGHT_SAMPLES = 5
+#: A free flight needs this many samples away from its contacts for its parabola (three
+#: coefficients and one degree of freedom).
+MIN_FLIGHT_SAMPLES = 4
 #: Contacts are the samples lowest within this window either side (s; ±1 sample at least).
 CONTACT_WINDOW = 0.02
 #: A parabola leaves out the samples within this time of a contact sample (s; at least
