@@ -20,12 +20,10 @@ from scipy.integrate import solve_ivp
 _OPTS = dict(method="DOP853", rtol=1e-12, atol=1e-14)
 
 
-def scipy_bounces(h0, bounce, k, n, g=9.81):
-    """Drop from rest at h0 (m, t = 0) onto x = 0 with drag k (s/m); `n` onsets.
-
-    `bounce(i, w)` gives (e, t_c) of bounce i at impact speed w (m/s): the ball leaves
-    at e·w after resting t_c (s). **Returns:** (onset times [s], impact speeds [m/s]).
-    """
+def flight_equations(k, g):
+    """(rise, fall, apex, floor): a vertical flight's right-hand sides under gravity g and
+    quadratic drag k (rise v' = −g(1 + k²v²), fall v' = −g(1 − k²v²)) and the terminal
+    events at its apex (v = 0, falling through) and at the floor (x = 0, falling)."""
 
     def rise(t, y):
         return [y[1], -g * (1.0 + k * k * y[1] ** 2)]
@@ -41,6 +39,16 @@ def scipy_bounces(h0, bounce, k, n, g=9.81):
 
     apex.terminal, apex.direction = True, -1
     floor.terminal, floor.direction = True, -1
+    return rise, fall, apex, floor
+
+
+def scipy_bounces(h0, bounce, k, n, g=9.81):
+    """Drop from rest at h0 (m, t = 0) onto x = 0 with drag k (s/m); `n` onsets.
+
+    `bounce(i, w)` gives (e, t_c) of bounce i at impact speed w (m/s): the ball leaves
+    at e·w after resting t_c (s). **Returns:** (onset times [s], impact speeds [m/s]).
+    """
+    rise, fall, apex, floor = flight_equations(k, g)
     t0, y0 = 0.0, [h0, 0.0]
     onsets, impacts = [], []
     for i in range(n):

@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from bounce_reference import flight_equations
 from scipy.integrate import solve_ivp
 
 _OPTS = dict(method="DOP853", rtol=1e-11, atol=1e-13)
@@ -49,21 +50,7 @@ class VideoLike:
 
 def _heights(h0: float, es: np.ndarray, k: float, g: float, t_end: float):
     """A dense solution of the drop: a list of (t0, t1, sol) flight pieces."""
-
-    def rise(t, y):
-        return [y[1], -g * (1.0 + k * k * y[1] ** 2)]
-
-    def fall(t, y):
-        return [y[1], -g * (1.0 - k * k * y[1] ** 2)]
-
-    def apex(t, y):
-        return y[1]
-
-    def floor(t, y):
-        return y[0]
-
-    apex.terminal, apex.direction = True, -1
-    floor.terminal, floor.direction = True, -1
+    rise, fall, apex, floor = flight_equations(k, g)
     pieces, t0, y0, i = [], 0.0, [h0, 0.0], 0
     while t0 < t_end and i < len(es):
         down = solve_ivp(fall, (t0, t0 + 10.0), y0, events=floor, dense_output=True, **_OPTS)

@@ -52,11 +52,7 @@ def trace_flights(t, x) -> list[Flight]:
     if len(t) < 3 * MIN_FLIGHT_SAMPLES:
         return []
     dt = float(np.median(np.diff(t)))
-    m = max(1, int(round(CONTACT_WINDOW / dt)))
-    padded = np.concatenate([np.full(m, np.inf), x, np.full(m, np.inf)])
-    window = np.lib.stride_tricks.sliding_window_view(padded, 2 * m + 1)
-    contacts = np.flatnonzero((np.argmin(window, axis=1) == m) & (x < np.median(x)))
-    contacts = contacts[(contacts > 0) & (contacts < len(x) - 1)]
+    contacts = contact_rows(t, x)
     guard = max(1, int(math.ceil(CONTACT_GUARD / dt)))
     fits = []
     for a, b in zip(contacts[:-1], contacts[1:], strict=True):
@@ -149,17 +145,22 @@ def apex_ratios(t, x, *, level: float, scale: float, drag: float, gravity: float
     return np.asarray(out)
 
 
-def first_contact(t, x) -> int | None:
-    """The row of a drop trace's first contact sample (`trace_flights`' rule), or None."""
+def contact_rows(t, x) -> np.ndarray:
+    """The rows of a drop trace's contact samples: each the lowest within
+    ±`CONTACT_WINDOW` (±1 sample at least), below the trace's median, not an end row."""
     t, x = np.asarray(t, dtype=float), np.asarray(x, dtype=float)
     if len(t) < 3:
-        return None
-    dt = float(np.median(np.diff(t)))
-    m = max(1, int(round(CONTACT_WINDOW / dt)))
+        return np.zeros(0, int)
+    m = max(1, int(round(CONTACT_WINDOW / float(np.median(np.diff(t))))))
     padded = np.concatenate([np.full(m, np.inf), x, np.full(m, np.inf)])
     window = np.lib.stride_tricks.sliding_window_view(padded, 2 * m + 1)
     contacts = np.flatnonzero((np.argmin(window, axis=1) == m) & (x < np.median(x)))
-    contacts = contacts[(contacts > 0) & (contacts < len(x) - 1)]
+    return contacts[(contacts > 0) & (contacts < len(x) - 1)]
+
+
+def first_contact(t, x) -> int | None:
+    """The row of a drop trace's first contact sample (`contact_rows`), or None."""
+    contacts = contact_rows(t, x)
     return int(contacts[0]) if contacts.size else None
 
 
