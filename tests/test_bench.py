@@ -88,6 +88,15 @@ def test_ratio_goal_takes_the_fastest_run_within_the_error_bound():
     assert goal["vs_dop853_events"] == pytest.approx(0.004 / 0.050)
     assert goal["met"] is False  # 0.1 > 1/20
     assert _bench_goals._ratio_goal("time_ratio_1e9", rows[1:2] + rows[2:], 1e-9)["value"] is None
+    # The compiled loop's runs are peers too: the fastest accurate one is the best peer.
+    compiled = [
+        _row("Numba DOP853 + events", 7e-10, 0.002, True),
+        _row("Numba DOP853 + events", 3e-9, 0.001, True),
+    ]
+    result = {"work_precision": rows, "compiled_loop": {"rows": compiled}}
+    goal = _bench_goals._ratio_goal("time_ratio_1e9", _bench_goals.runs(result), 1e-9)
+    assert goal["value"] == pytest.approx(0.004 / 0.002) and goal["best_peer"].startswith("Numba")
+    assert _bench_goals.runs({"work_precision": rows}) == rows  # without Numba: scipy's and NumPy's
 
 
 def _user_section(sim_ratio=0.6):
@@ -247,7 +256,7 @@ def test_compiled_peer_without_numba_is_one_line(monkeypatch):
     monkeypatch.setattr(_compiled, "numba", None)
     lines, rows = [], [_row("mine", 1e-9, 0.001, False)]
     out = _compiled.bench_section((1e-8,), 4, 1e-9, TS, None, rows, None, lines.append)
-    assert out["rows"] == [] and out["throughput"] == []
+    assert out["rows"] == [] and out["throughput"] == [] and out["peer_wrong_rows"] is None
     assert len(lines) == 1 and "numba is not installed" in lines[0]
     assert rows[0]["vs_compiled"] is None
 
@@ -303,7 +312,7 @@ def test_bench_tiny_end_to_end(tmp_path, capsys):
     assert result["gradient"]["losses"] == [] and result["goals"]["gradient_ratio"]["value"] is None
     assert result["scale_out"]["rows"] == []
     # time_ratio_1e9 recomputed from the rows.
-    ok = [r for r in result["work_precision"] if r["error"] is not None and r["error"] <= 1e-9]
+    ok = [r for r in _bench_goals.runs(result) if r["error"] is not None and r["error"] <= 1e-9]
     mine = min(r["wall_s"] for r in ok if not r["peer"])
     best_peer = min(r["wall_s"] for r in ok if r["peer"])
     assert math.isclose(result["goals"]["time_ratio_1e9"]["value"], mine / best_peer, rel_tol=1e-12)
@@ -315,6 +324,9 @@ def test_bench_tiny_end_to_end(tmp_path, capsys):
         assert tight["error"] <= 1e-9 and tight["crossings"] >= 10 and tight["accepted"] > 0
         assert all({"vs_scipy", "vs_compiled"} <= set(r) for r in result["work_precision"] if not r["peer"])
         assert [r["threads"] for r in compiled["throughput"]][0] == 1
+        # Every row of its throughput runs checked against jaxunilat's: none wrong.
+        assert compiled["peer_wrong_rows"] == 0 and compiled["peer_check"]["n"] == 4
+        assert all(r["valid"] and r["peer_wrong_rows"] == 0 for r in compiled["throughput"])
     # identify's registered rows, skipped at this size.
     assert result["identification"]["status"].startswith("skipped") and result["identification"]["rows"] == []
     assert result["joint_fit"]["status"].startswith("skipped")

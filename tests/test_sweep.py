@@ -138,3 +138,76 @@ def test_sweep_refuses_bad_arguments(kwargs, match):
 def test_sweep_refuses_mismatched_batches():
     with pytest.raises(ValueError, match="leading axes disagree"):
         jaxunilat.sweep(_affine, np.ones(3), np.ones(4), 2.0, in_axes=(0, 0, None))
+
+
+# -- batch sizing (`batch_size=None`) ---------------------------------------------------------
+
+GIB = 2**30
+
+
+def test_chunk_rows_takes_the_whole_batch_when_it_fits():
+    """The sizing rule with the bench's GPU figures: ~119 KB of work, 16 KB of output and
+    16 B of arguments per row, 60% of an 80 GB device's free memory."""
+    from jaxunilat._solver._sweep import HEADROOM, chunk_rows
+
+    per_row, fixed, budget = (119e3, 16e3, 16.0), 1e6, HEADROOM * 80 * GIB
+    assert chunk_rows(100_000, per_row, fixed, budget) is None  # 13.5 GB: all at once
+    chunk = chunk_rows(1_000_000, per_row, fixed, budget)  # 135 GB: chunks
+    assert chunk is not None and chunk % 8 == 0 and 100_000 < chunk < 1_000_000
+    k = -(-1_000_000 // chunk)
+    assert fixed + 1_000_000 * (16e3 + 16) + chunk * sum(per_row) <= budget  # it fits ...
+    assert chunk * k - 1_000_000 < 8 * k  # ... in equal chunks, little padding
+    assert chunk_rows(1_000_000, per_row, fixed, budget * 10) is None
+    assert chunk_rows(10, (1.0, 0.0, 0.0), 0.0, 4.0) == 4  # fewer than 8 rows fit: not rounded
+    with pytest.raises(ValueError, match="arguments and outputs alone"):
+        chunk_rows(1_000_000, per_row, fixed, 8 * GIB)  # 16 GB of outputs in 8 GB
+
+
+def _drop(kappa, k_r):
+    sol = jaxunilat.simulate(
+        jaxunilat.Ball.table1(2, kappa=kappa, k_r=k_r),
+        np.array([-0.4, -1 / 0.122]),
+        0.3,
+        solver="event",
+        rtol=1e-8,
+        atol=1e-8,
+        samples=11,
+        throw=False,
+    )
+    return sol.ys["x"], sol.status
+
+
+def test_sweep_sizes_a_lockstep_batch_to_the_free_memory(monkeypatch):
+    """With lockstep batching (GPUs; forced here) and a small memory budget `sweep` runs
+    the rows in smaller vmapped chunks, whose program fits the budget, with the same
+    results bit for bit as all rows at once; with plenty of memory, all at once."""
+    from jaxunilat._solver import _sweep
+
+    monkeypatch.setenv("JAXUNILAT_VMAP", "batch")
+    for cache in ("_SIZING", "_CHOSEN", "_POINTS"):
+        monkeypatch.setattr(_sweep, cache, {})
+    n = 160
+    kappa, k_r = np.geomspace(5e3, 2e4, n), np.linspace(0.1, 0.4, n)
+    devices = jax.devices()[:1]
+    whole = _sweep.sweep_compiled(_drop, kappa, k_r, devices=devices)  # plenty of memory
+    assert _sweep._sized(_drop, (kappa, k_r), (0, 0), devices, n) == (None, 0)
+    full = _sweep._total(whole.memory_analysis())
+    x_all, status = (np.asarray(a) for a in jaxunilat.sweep(_drop, kappa, k_r, devices=devices))
+    assert np.all(status == 0)
+
+    monkeypatch.setattr(_sweep, "_CHOSEN", {})
+    monkeypatch.setattr(_sweep, "_free_bytes", lambda devices: int(full / _sweep.HEADROOM / 3))
+    chunk, n_pad = _sweep._sized(_drop, (kappa, k_r), (0, 0), devices, n)
+    assert chunk is not None and chunk < n and chunk % _sweep.ALIGN == 0 and (n + n_pad) % chunk == 0
+    chunked = _sweep.sweep_compiled(_drop, kappa, k_r, devices=devices)
+    assert _sweep._total(chunked.memory_analysis()) <= _sweep._budget(devices) < full
+    x, status = (np.asarray(a) for a in jaxunilat.sweep(_drop, kappa, k_r, devices=devices))
+    assert x.shape == (n, 11) and np.all(status == 0)
+    np.testing.assert_array_equal(x, x_all)
+    traces = jaxunilat.trace_counts()["sweep"]
+    jaxunilat.sweep(_drop, kappa * 1.01, k_r, devices=devices)  # new values: the same chunks
+    assert jaxunilat.trace_counts()["sweep"] == traces
+    # batch_size overrides the sizing; on rows one by one (a CPU's default) nothing is measured.
+    assert _sweep._sized(_drop, (kappa, k_r), (0, 0), devices, n)[0] == chunk
+    monkeypatch.setenv("JAXUNILAT_VMAP", "rows")
+    assert _sweep._sized(_drop, (kappa, k_r), (0, 0), devices, n) == (None, 0)

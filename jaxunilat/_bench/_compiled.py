@@ -14,7 +14,9 @@ the 2-state model with smooth right-hand sides per segment (as the event mode do
   exact Kelvin–Voigt κδ + k_r δ̇ of that region (exact Heaviside);
 - the gap functions x − wall and v are checked at each accepted step's end; a sign
   change is located as a root of the step's dense output (Illinois regula falsi) and
-  the segment restarts there (wall entries and exits, apexes and deepest points);
+  the segment restarts there (wall entries and exits, apexes and deepest points); a wall
+  that x passes and leaves again within one step (a grazing contact: x − wall has the
+  same sign at both ends) is found where v turns, from x there;
 - the error norm and tolerances are scipy's (scale atol + rtol·max(|y|, |y_new|),
   the 5th/3rd-order blended estimate), with Hairer's PI step control (β = 0.04);
 - the three extra dense-output stages are computed only on steps that contain a save
@@ -23,6 +25,11 @@ the 2-state model with smooth right-hand sides per segment (as the event mode do
 - every stage is written out as scalar code with the coefficients as literals
   (`_generated_source`), compiled with fused multiply-adds allowed (fastmath "contract"
   only: no reassociation, NaN and inf keep their IEEE meaning).
+
+In the bench's throughput rows every trajectory is checked against jaxunilat's own row of
+the same pairs (`check_rows`: within the two accuracy contracts, else judged against the
+scipy reference); only the right rows count towards the peer's throughput, and
+`peer_wrong_rows` says how many were wrong.
 
 Numba is optional (`numba` is in the `bench` extra): `available()` says whether it
 imports. Compilation happens on the first call of each function (`warm_up`).
@@ -205,10 +212,10 @@ if numba is not None:
         return y_old + s
 
     @_jit
-    def _root(theta_lo, g_lo, g_hi, target, y_old, f, h, t):
-        """θ ∈ (0, 1] where the interpolant crosses `target` (Illinois regula falsi);
-        g_lo, g_hi: its values minus target at θ_lo and 1, of opposite signs."""
-        lo, hi = theta_lo, 1.0
+    def _root(theta_lo, theta_hi, g_lo, g_hi, target, y_old, f, h, t):
+        """θ ∈ (θ_lo, θ_hi] where the interpolant crosses `target` (Illinois regula falsi);
+        g_lo, g_hi: its values minus target at θ_lo and θ_hi, of opposite signs."""
+        lo, hi = theta_lo, theta_hi
         side = 0
         for _ in range(200):
             if (hi - lo) * h <= 4e-16 * max(abs(t), abs(h)):
@@ -232,43 +239,70 @@ if numba is not None:
         return hi
 
     @_jit
-    def _crossing(g0, g1, inside, target, y_old, f, h, t):
-        """θ of the crossing of `target` by the interpolant, from g0 (start, which should
-        be on the `inside` sign ±1, or 0 at a segment's start) to g1 (end, outside)."""
-        return _root(0.0, g0 if inside * g0 > 0.0 else inside * 1e-300, g1, target, y_old, f, h, t)
+    def _crossing(g0, g1, inside, target, y_old, f, h, t, theta_end):
+        """θ of the crossing of `target` by the interpolant, from g0 (θ = 0, which should
+        be on the `inside` sign ±1, or 0 at a segment's start) to g1 (θ = θ_end, outside)."""
+        g0 = g0 if inside * g0 > 0.0 else inside * 1e-300
+        return _root(0.0, theta_end, g0, g1, target, y_old, f, h, t)
+
+    @_jit
+    def _turns(sgn, v, v_new, p):
+        """Whether v changes sign over the step: the segment's sign of v (an extremum
+        event) with drag, v's own sign change without (then v is not an event)."""
+        if p[4] > 0.0:
+            return sgn * v_new < 0.0
+        return v * v_new < 0.0
 
     @_jit
     def _next_event(region, sgn, x_new, v_new, t, h, x, v, fx_, fv_, p):
         """The step's first event: (θ, kind, wall) with θ > 1 for none. wall: −1 lower,
-        1 upper, 0 the observable v (apex, deepest point)."""
+        1 upper, 0 the observable v (apex, deepest point).
+
+        A wall that x passes and comes back from within one step (a grazing contact, or
+        a grazing exit: x − wall has the same sign at both ends of the step) is found
+        where x turns, at the root of v: if x there is beyond a wall of the region, the
+        wall is crossed before it (located on [0, θ_turn]), else the turn is an extremum.
+        """
         theta, kind, wall = 2.0, 0, 0
         lo, hi = p[5], p[6]
         if region == FREE and x_new < lo:
-            theta, kind, wall = _crossing(x - lo, x_new - lo, 1.0, lo, x, fx_, h, t), ENTRY, LOWER
+            theta, kind, wall = _crossing(x - lo, x_new - lo, 1.0, lo, x, fx_, h, t, 1.0), ENTRY, LOWER
         if region == FREE and x_new > hi:
-            th = _crossing(x - hi, x_new - hi, -1.0, hi, x, fx_, h, t)
+            th = _crossing(x - hi, x_new - hi, -1.0, hi, x, fx_, h, t, 1.0)
             if th < theta:
                 theta, kind, wall = th, ENTRY, UPPER
         if region == LOWER and x_new > lo:
-            theta, kind, wall = _crossing(x - lo, x_new - lo, -1.0, lo, x, fx_, h, t), EXIT, LOWER
+            theta, kind, wall = _crossing(x - lo, x_new - lo, -1.0, lo, x, fx_, h, t, 1.0), EXIT, LOWER
         if region == UPPER and x_new < hi:
-            theta, kind, wall = _crossing(x - hi, x_new - hi, 1.0, hi, x, fx_, h, t), EXIT, UPPER
-        if p[4] > 0.0 and sgn * v_new < 0.0:
-            th = _crossing(v, v_new, sgn, 0.0, v, fv_, h, t)
+            theta, kind, wall = _crossing(x - hi, x_new - hi, 1.0, hi, x, fx_, h, t, 1.0), EXIT, UPPER
+        if _turns(sgn, v, v_new, p):
+            inside = sgn if p[4] > 0.0 else (1.0 if v > 0.0 else -1.0)
+            th = _crossing(v, v_new, inside, 0.0, v, fv_, h, t, 1.0)
             if th < theta:
-                theta, kind, wall = th, EXTREMUM, 0
+                xt = _dense(th, x, fx_)
+                if region == FREE and xt > hi:
+                    theta, kind, wall = _crossing(x - hi, xt - hi, -1.0, hi, x, fx_, h, t, th), ENTRY, UPPER
+                elif region == FREE and xt < lo:
+                    theta, kind, wall = _crossing(x - lo, xt - lo, 1.0, lo, x, fx_, h, t, th), ENTRY, LOWER
+                elif region == LOWER and xt > lo:
+                    theta, kind, wall = _crossing(x - lo, xt - lo, -1.0, lo, x, fx_, h, t, th), EXIT, LOWER
+                elif region == UPPER and xt < hi:
+                    theta, kind, wall = _crossing(x - hi, xt - hi, 1.0, hi, x, fx_, h, t, th), EXIT, UPPER
+                elif p[4] > 0.0:
+                    theta, kind, wall = th, EXTREMUM, 0
         return theta, kind, wall
 
     @_jit
-    def _crosses(region, sgn, x_new, v_new, p):
-        """Whether a gap function changed sign over the step (then `_next_event` locates it)."""
+    def _crosses(region, sgn, v, x_new, v_new, p):
+        """Whether a gap function changed sign over the step, or v did (where x may have
+        passed a wall and come back): then `_next_event` looks for the first event."""
         if region == FREE:
             wall = x_new < p[5] or x_new > p[6]
         elif region == LOWER:
             wall = x_new > p[5]
         else:
             wall = x_new < p[6]
-        return wall or (p[4] > 0.0 and sgn * v_new < 0.0)
+        return wall or _turns(sgn, v, v_new, p)
 
     @_jit
     def _after_event(kind, wall, region, sgn, xe, ve, p):
@@ -343,7 +377,7 @@ if numba is not None:
                 warm_h[2 * (region + 1) + (1 if sgn > 0.0 else 0)] = h
                 first = False
             t_new = t1 if last else t + h
-            crosses = _crosses(region, sgn, x_new, v_new, p)
+            crosses = _crosses(region, sgn, v, x_new, v_new, p)
             if crosses or (i_save < n_ts and ts[i_save] <= t_new):
                 _extra(x, v, x_new, v_new, h, g, cs, kxm, w, kvm, kx, kv, fx_, fv_)
             theta, kind, wall = 2.0, 0, 0
@@ -536,28 +570,127 @@ def ratio_columns(wp_rows: list[dict], compiled_rows: list[dict], log) -> None:
         )
 
 
-def _throughput_rows(n, tol, timed, log) -> list[dict]:
-    from ._scale import SAMPLES, T1, Y0, pairs
+def contract_bound(tol: float, x, ts, contacts=None, lower: float = -0.4, upper: float = 0.4) -> np.ndarray:
+    """The event mode's accuracy contract (README, "The accuracy contract") for each row of
+    x (rows of samples at `ts`, m) at rtol = atol = `tol`: 1e3 · tol · X · (1 + N), X =
+    max(1 m, max |x|, max |v| · 1 s), m. |v| is taken from the samples' differences and N,
+    unless given (`contacts`, per row), counts the contacts the samples show: both can only
+    come out low, so the bound is at most the contract's."""
+    x = np.atleast_2d(np.asarray(x, float))
+    v = np.max(np.abs(np.diff(x, axis=1)) / np.diff(ts), axis=1)
+    scale = np.maximum(1.0, np.maximum(np.max(np.abs(x), axis=1), v * 1.0))
+    if contacts is None:
+        outside = (x < lower) | (x > upper)
+        contacts = outside[:, 0] + np.sum(outside[:, 1:] & ~outside[:, :-1], axis=1)
+    return 1e3 * tol * scale * (1.0 + np.asarray(contacts, float))
+
+
+#: The most disagreeing rows `check_rows` judges against the scipy reference (each ~0.2 s).
+MAX_REFERENCES = 64
+
+
+def check_rows(x_peer, status, x_own, own_tol: float, kappa, k_r, ts, tol: float, references=None) -> dict:
+    """The peer's rows (x_peer at `ts`, per-row `status`, at tolerance `tol`) against the
+    project's rows of the same (κ, k_r) pairs (x_own, at `own_tol`).
+
+    A row is right where both agree within the sum of their accuracy contracts
+    (`contract_bound`): were both within their contracts they could differ by no more.
+    A row beyond that, or with a failure status, is judged against the scipy reference
+    (event-located DOP853 at rtol 1e-13; at most `MAX_REFERENCES` rows, cached in
+    `references` by row): the peer is wrong there if it failed or is off the reference by
+    more than its contract (the project likewise). Disagreeing rows beyond the references
+    count as the peer's wrong rows, unjudged.
+
+    **Returns:** `peer_wrong_rows`, `jaxunilat_wrong_rows`, `disagreeing_rows`,
+    `judged_rows`, `unjudged_rows`, `max_abs_dx_m` (largest |x_peer − x_own|), and
+    `wrong_examples`: up to 5 wrong rows' κ, k_r and errors against the reference.
+    """
+    from ._peers import Params, reference
+    from ._scale import Y0
+
+    references = {} if references is None else references
+    x_peer, x_own, status = np.asarray(x_peer, float), np.asarray(x_own, float), np.asarray(status)
+    with np.errstate(invalid="ignore"):
+        diff = np.max(np.abs(x_peer - x_own), axis=1)
+    diff = np.where(np.isfinite(diff), diff, np.inf)
+    screen = contract_bound(tol, x_own, ts) + contract_bound(own_tol, x_own, ts)
+    disagree = np.nonzero((diff > screen) | (status != 0))[0]
+    judged, unjudged = disagree[:MAX_REFERENCES], disagree[MAX_REFERENCES:]
+    peer_wrong, own_wrong, examples = [], [], []
+    for i in judged:
+        i = int(i)
+        if i not in references:
+            references[i] = reference(Params(kappa=float(kappa[i]), k_r=float(k_r[i])), Y0, ts)
+        ref = references[i]
+        contacts = [len(ref.entries)]
+        with np.errstate(invalid="ignore"):
+            err_peer, err_own = (float(np.max(np.abs(x[i] - ref.x))) for x in (x_peer, x_own))
+        if status[i] != 0 or not err_peer <= contract_bound(tol, ref.x, ts, contacts)[0]:
+            peer_wrong.append(i)
+            if len(examples) < 5:
+                examples.append(
+                    {
+                        "row": i,
+                        "kappa": float(kappa[i]),
+                        "k_r": float(k_r[i]),
+                        "status": int(status[i]),
+                        "peer_error_m": err_peer,
+                        "jaxunilat_error_m": err_own,
+                    }
+                )
+        if not err_own <= contract_bound(own_tol, ref.x, ts, contacts)[0]:
+            own_wrong.append(i)
+    return {
+        "peer_wrong_rows": len(peer_wrong) + len(unjudged),
+        "jaxunilat_wrong_rows": len(own_wrong),
+        "disagreeing_rows": len(disagree),
+        "judged_rows": len(judged),
+        "unjudged_rows": len(unjudged),
+        "max_abs_dx_m": float(np.max(diff)),
+        "wrong_examples": examples,
+    }
+
+
+def _own_rows(n: int) -> dict:
+    """The project's rows of the throughput scene's n pairs (`_scale.trajectory`, swept
+    the platform's faster way), for `bench_section` when it is not given them."""
+    from .._solver._sweep import sweep
+    from ._scale import one_by_one_fastest, pairs, sweep_kwargs, trajectory
+
+    kappa, k_r = pairs(n)
+    x = sweep(trajectory, kappa, k_r, **sweep_kwargs(n, one_by_one=one_by_one_fastest()))[0]
+    return {"x": np.asarray(x), "kappa": kappa, "k_r": k_r}
+
+
+def _throughput_rows(n, tol, timed, log, own) -> tuple[list[dict], dict]:
+    from ._scale import SAMPLES, T1, TOL, Y0, pairs
 
     kappa, k_r = pairs(n)
     ts = np.linspace(0.0, T1, SAMPLES)
-    rows = []
+    rows, checks, references = [], [], {}
     for parallel in (False, True):
         timing = timed(lambda p=parallel: solve_batch(kappa, k_r, Y0, ts, rtol=tol, atol=tol, parallel=p))
-        stats = timing.out[1]
+        x, stats = timing.out
         cores = threads() if parallel else 1
         # The process's CPU time for one more run: on a shared machine the wall time
         # also counts the other processes' share of the cores.
         cpu = time.process_time()
         solve_batch(kappa, k_r, Y0, ts, rtol=tol, atol=tol, parallel=parallel)
         cpu = time.process_time() - cpu
+        # Every row against the project's: only the right rows count towards the throughput.
+        check = check_rows(x, stats[:, 3], own["x"], TOL, kappa, k_r, ts, tol, references)
+        checks.append(check)
+        wrong = check["peer_wrong_rows"]
         rows.append(
             {
                 "method": f"{METHOD}, tol {tol:g}, "
                 + (f"prange on {cores} threads" if parallel else "serial"),
                 "n": int(n),
                 "threads": cores,
-                "traj_per_s": n / timing.median,
+                "traj_per_s": (n - wrong) / timing.median,
+                "traj_per_s_all_rows": n / timing.median,
+                "peer_wrong_rows": wrong,
+                "valid": wrong == 0,
                 "wall_s": timing.median,
                 "cpu_s": cpu,
                 "peak_mem_mb": None,
@@ -570,34 +703,58 @@ def _throughput_rows(n, tol, timed, log) -> list[dict]:
         r = rows[-1]
         log(
             f"  compiled loop N = {n:>6}, {'prange' if parallel else 'serial'}, {cores} thread(s): "
-            f"{r['traj_per_s']:10.1f} traj/s  wall {r['wall_s']:.4f} s (CPU {cpu:.4f} s)  "
-            f"steps mean {r['steps_mean']:.0f}"
+            f"{r['traj_per_s']:10.1f} right traj/s  wall {r['wall_s']:.4f} s (CPU {cpu:.4f} s)  "
+            f"steps mean {r['steps_mean']:.0f}; wrong rows {wrong} of {n} "
+            f"(max |dx| vs jaxunilat {check['max_abs_dx_m']:.1e} m)"
         )
-    return rows
+    worst = max(checks, key=lambda c: c["peer_wrong_rows"])
+    check = {
+        "how": "every row of the peer's throughput runs against jaxunilat.sweep's rows of the same pairs "
+        f"(event mode, {TOL:g}): a row is right where the two agree within the sum of their accuracy "
+        "contracts (1e3 tol X (1 + N)); the others are judged against the scipy reference (DOP853 + "
+        "events, rtol 1e-13), wrong where off it by more than the contract or failed",
+        "n": int(n),
+        **worst,
+    }
+    return rows, check
 
 
-def bench_section(tols, throughput_n: int, max_error: float, ts, x_ref, wp_rows, timed, log) -> dict:
+def bench_section(
+    tols, throughput_n: int, max_error: float, ts, x_ref, wp_rows, timed, log, own: dict | None = None
+) -> dict:
     """The bench's compiled-loop section: work-precision rows at `tols` (rtol = atol),
     the ratio columns of the project's rows (`ratio_columns`), and the serial and
     `prange` throughput over `throughput_n` (κ, k_r) pairs at the loosest tolerance whose
-    example-2 error is at most `max_error` m. Without Numba: one line, no rows."""
+    example-2 error is at most `max_error` m, every row checked against the project's
+    rows of the same pairs (`own`: `x`, `kappa`, `k_r` of the throughput scene; swept
+    here if not given or of other pairs): `peer_wrong_rows`, and a throughput of the
+    right rows only. Without Numba: one line, no rows."""
     if not available():
         log("  " + why_missing())
         for row in (r for r in wp_rows if not r["peer"]):
             row["vs_compiled"] = None
-        return {"status": why_missing(), "rows": [], "throughput": []}
+        return {"status": why_missing(), "rows": [], "throughput": [], "peer_wrong_rows": None}
+    from ._scale import pairs
+
     compile_s = warm_up()
     rows = _wp_rows(tols, ts, x_ref, timed, log, compile_s)
     ratio_columns(wp_rows, rows, log)
     ok = [r for r in rows if r["error"] <= max_error]
     tol = max(float(r["setting"].split()[1]) for r in ok) if ok else min(tols)
+    kappa, k_r = pairs(throughput_n)
+    if own is None or not (np.array_equal(own["kappa"], kappa) and np.array_equal(own["k_r"], k_r)):
+        own = _own_rows(throughput_n)
+    throughput, check = _throughput_rows(throughput_n, tol, timed, log, own)
     return {
         "status": "measured",
         "how": "event-located DOP853, unrolled scalar code in Numba; compile time excluded (warm-up call)",
         "numba": numba.__version__,
         "compile_s": compile_s,
         "rows": rows,
-        "throughput": _throughput_rows(throughput_n, tol, timed, log),
+        "throughput": throughput,
+        # Rows of the throughput runs whose result is off the accuracy contract (the worse run).
+        "peer_wrong_rows": check["peer_wrong_rows"],
+        "peer_check": check,
     }
 
 

@@ -447,7 +447,9 @@ def per_step_fit(rows: list[dict], method: str = "event (tsit5)") -> dict | None
 # -- throughput and scale-out ----------------------------------------------------------------
 
 
-def _throughput(size: Size, wp_rows, log) -> tuple[list[dict], dict]:
+def _throughput(size: Size, wp_rows, log) -> tuple[list[dict], dict, dict]:
+    """The throughput rows, the accuracy checks of the largest batch, and that batch's
+    rows (`x`, `kappa`, `k_r`: the compiled-loop peer's rows are checked against them)."""
     from ._scale import PIECE, TOL, one_by_one_fastest, run_sweep, strategy
 
     rows, checks = [], {}
@@ -475,6 +477,7 @@ def _throughput(size: Size, wp_rows, log) -> tuple[list[dict], dict]:
                     "compile_s": row["compile_s"],
                     "devices": row["devices"],
                     "strategy": row["strategy"],
+                    "rows_at_once": row["rows_at_once"],
                     "all_ok": row["all_ok"],
                     "steps_mean": row["steps_mean"],
                     "steps_max": row["steps_max"],
@@ -523,7 +526,7 @@ def _throughput(size: Size, wp_rows, log) -> tuple[list[dict], dict]:
             }
         )
         log(f"  scipy loop ({method}, tol {tol:g}), {len(kappa)} pairs: {len(kappa) / wall:.1f} traj/s")
-    return rows, checks
+    return rows, checks, {k: last[k] for k in ("x", "kappa", "k_r")}
 
 
 def _scale_out(size: Size, log) -> dict:
@@ -913,7 +916,7 @@ def run_bench(size_name: str = "full", log: Callable[[str], None] = print) -> di
     result["work_precision"] = project + _peer_rows(size, ts, ref.x, log)
     result["compile_s"] = compiled
     log("throughput:")
-    result["throughput"], result["throughput_checks"] = _throughput(size, result["work_precision"], log)
+    result["throughput"], result["throughput_checks"], own = _throughput(size, result["work_precision"], log)
     from . import _compiled
 
     log("compiled loop (event-located DOP853 in Numba), a peer beside scipy:")
@@ -926,6 +929,7 @@ def run_bench(size_name: str = "full", log: Callable[[str], None] = print) -> di
         result["work_precision"],
         lambda fn: _timed(fn, size),
         log,
+        own=own,
     )
     result["scale_out"] = _scale_out(size, log) if size.scale_out else {"how": f"skipped at size {size.name}"}
     result["scale_out"].setdefault("rows", [])

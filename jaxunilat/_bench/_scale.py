@@ -1,6 +1,7 @@
 """The benchmark's throughput scene and its 1-device against N-device measurement.
 
-Two ways to sweep: vmapped chunks of rows (`batch_size` `CHUNK`), and rows one by one
+Two ways to sweep: vmapped rows, as many at once as the device's free memory holds
+(`sweep`'s default `batch_size=None`: all of them, or equal chunks), and rows one by one
 (`batch_size=1`), which on a CPU whose loops compile into single kernels
 (`use_loop_kernels`) runs each row at its own pace instead of in lockstep.
 `jaxunilat bench` gives its process one CPU device per core (`host_devices`) so that
@@ -33,8 +34,6 @@ TOL = 1e-10
 PIECE = "dopri8"
 MAX_STEPS = 512
 MAX_EVENTS = 256
-#: Rows vmapped together per device (a vmapped while loop holds every row's step buffers).
-CHUNK = 1000
 
 
 def pairs(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -95,7 +94,7 @@ def host_devices() -> int | None:
 
 
 def one_by_one_fastest() -> bool:
-    """Whether sweeping rows one by one beats vmapped chunks here: on a CPU whose loops
+    """Whether sweeping rows one by one beats vmapped rows here: on a CPU whose loops
     compile into single kernels (`use_loop_kernels`). On a GPU, vmap."""
     import jax
 
@@ -106,22 +105,24 @@ def one_by_one_fastest() -> bool:
 
 def strategy(one_by_one: bool) -> str:
     """The sweep strategy's name in the benchmark's rows."""
-    return "rows one by one (batch_size=1)" if one_by_one else f"vmapped (chunks of {CHUNK})"
+    return "rows one by one (batch_size=1)" if one_by_one else "vmapped (batch sized to free memory)"
 
 
 def sweep_kwargs(n: int, devices=None, one_by_one: bool = False) -> dict:
-    """`sweep`'s options for a batch of n rows: one by one, or vmapped in chunks of
-    `CHUNK` rows beyond that size."""
+    """`sweep`'s options for a batch of n rows: one by one, or vmapped with `sweep`'s own
+    sizing (all rows at once where the compiled program fits the free memory, else equal
+    chunks of the most that fit)."""
+    del n  # sweep sizes the batch itself
     if one_by_one:
         return dict(devices=devices, batch_size=1)
-    return dict(devices=devices, batch_size=CHUNK if n > CHUNK else None)
+    return dict(devices=devices)
 
 
 def run_sweep(n: int, repeats: int, devices=None, one_by_one: bool = False) -> dict:
     """Time `sweep(trajectory, ...)` over n pairs: compile, median wall, memory, steps."""
     import jax
 
-    from .._solver._sweep import sweep, sweep_compiled
+    from .._solver._sweep import batch_rows, sweep, sweep_compiled
 
     kappa, k_r = pairs(n)
     kw = sweep_kwargs(n, devices, one_by_one)
@@ -142,10 +143,13 @@ def run_sweep(n: int, repeats: int, devices=None, one_by_one: bool = False) -> d
         per_device = mem.argument_size_in_bytes + mem.output_size_in_bytes + mem.temp_size_in_bytes
         per_device -= mem.alias_size_in_bytes
     x, status, steps = (np.asarray(a) for a in out)
+    batch = kw.get("batch_size") or batch_rows(trajectory, kappa, k_r, devices=devices)
     return {
         "n": int(n),
         "strategy": strategy(one_by_one),
         "devices": n_dev,
+        # Rows a device vmaps at once (the chunk of `lax.map`, or all of its rows).
+        "rows_at_once": int(min(batch, -(-n // n_dev))),
         "wall_s": wall,
         "runs": len(walls),
         "compile_s": compile_s,

@@ -26,10 +26,27 @@ process only (e.g. `jax.local_devices()`) each process sweeps on its own and not
 gathered or compared. `tests/distributed_worker.py` is a complete example; a process
 that dies ends the others through `jax.distributed`'s heartbeat
 (`heartbeat_timeout_seconds`).
+
+Batch sizing (`batch_size=None`, `_sized`). Where `simulate` batches in lockstep (a GPU;
+`batching_mode() == "batch"`) a vmapped solve holds every row's loop buffers at once, so the
+rows one device may hold at once are sized from the compiled program's memory analysis and
+the device's free memory: all of them if the whole batch's program (temp + output + argument
+bytes) fits in `HEADROOM` of the free memory, else the per-row bytes of each kind are the
+slope between that program and one for another number of rows (an earlier sweep's, else one
+compiled for `_PROBE` rows), and the device's rows run in equal chunks (`lax.map`, a
+multiple of `ALIGN` rows where possible) of the largest size whose temporaries, with every
+row's arguments and outputs, fit (`chunk_rows`). A size chosen once is kept while it fits
+(new values do not recompile). Free memory: `bytes_limit - bytes_in_use` of
+`Device.memory_stats()`, or on a host device the host's available memory (at most
+`HOST_CAP`, shared by this process's devices in the mesh); the processes of a multi-process
+mesh take the smallest. Where `simulate` runs vmapped rows one by one (a CPU) a row's work
+is not held for every row, and `sweep` vmaps all rows at once as before.
 """
 
 from __future__ import annotations
 
+import math
+import os
 import zlib
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -40,6 +57,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ..internal._errors import InputError
+from ._batching import batching_mode
 from ._simulate import _TRACES
 
 AXIS = "batch"
@@ -49,6 +67,25 @@ AXIS = "batch"
 #: its program fingerprint or None on one process).
 _CACHE: dict[tuple, tuple] = {}
 _EXECUTABLES: dict[tuple, tuple] = {}
+
+#: The share of a device's free memory that an automatically sized batch may fill.
+HEADROOM = 0.6
+#: The most host memory a batch on host (CPU) devices is sized for, bytes.
+HOST_CAP = 64 * 2**30
+#: A chunk is a multiple of this many rows where it can be (`chunk_rows`).
+ALIGN = 8
+#: Rows per device that `sweep` vmaps at once without measuring (fewer than twice the probe).
+_SMALL = 64
+#: Rows per device of the program compiled to measure the per-row bytes.
+_PROBE = 32
+#: The per-row bytes of a function's program, (temp, output, argument) and the fixed bytes,
+#: by (fn, axes, device ids, the rows' types); and the batch chosen for a number of rows per
+#: device, with the bytes it needs: reused while that still fits (no new compile).
+_SIZING: dict[tuple, tuple] = {}
+_CHOSEN: dict[tuple, tuple] = {}
+#: The memory analyses of the whole-batch programs compiled so far, by that key and rows
+#: per device (a second one gives the slope without a probe).
+_POINTS: dict[tuple, dict] = {}
 
 
 def _normalize_axes(in_axes, n_args: int) -> tuple[int | None, ...]:
@@ -272,14 +309,23 @@ def sweep(
       process's devices after `jax.distributed.initialize()`; then every process must
       call `sweep` with the same function and arguments, else an `InputError` on every
       process, and each gets the whole result).
-    - `batch_size`: `None` vmaps all of a device's rows at once; an integer runs them
-      in chunks of that many vmapped rows (`lax.map`), which bounds memory for large
-      batches (a vmapped while loop holds every row's buffers). `1` runs the rows one
-      after another, unbatched: each row's loop stops at its own last step (no
-      lockstep behind the slowest row) and, after `use_loop_kernels()`, compiles into
-      one CPU kernel. On a CPU that is the fastest for event-mode sweeps (README,
-      Performance); on a GPU, vmap. On a CPU `simulate`'s batching rule runs its vmapped
-      rows one by one anyway (`_batching.py`), so there all three run them alike.
+    - `batch_size`: `None` (default) sizes the batch to the devices' free memory: where
+      `simulate` batches in lockstep (a GPU) a device vmaps all its rows at once if the
+      compiled program (temp + output + argument bytes) fits in 60% (`HEADROOM`) of its
+      free memory, else runs them in equal chunks (`lax.map`) of the most vmapped rows
+      that fit beside every row's arguments and outputs (the per-row bytes: the slope
+      between the program compiled for the whole batch and one for another size, an
+      earlier sweep's or 32 rows: one extra compile, once per function and row shapes,
+      only when the whole batch does not fit); a batch whose arguments and outputs alone
+      do not fit is an `InputError`. On a CPU
+      (`simulate` runs vmapped rows one by one) it vmaps all rows at once. An integer
+      runs them in chunks of that many vmapped rows (`len(rows)`: all at once, whatever
+      the memory). `1` runs the rows one after another, unbatched: each row's loop stops
+      at its own last step (no lockstep behind the slowest row) and, after
+      `use_loop_kernels()`, compiles into one CPU kernel. On a CPU that is the fastest
+      for event-mode sweeps (README, Performance); on a GPU, vmap. On a CPU
+      `simulate`'s batching rule runs its vmapped rows one by one anyway
+      (`_batching.py`), so there all three run them alike.
 
     **Returns:** `fn`'s outputs stacked along a leading batch axis of the input's
     length (`jax.Array`s; NumPy arrays, on every process, when the devices span several
@@ -304,9 +350,193 @@ def _prepare(fn, args, in_axes, devices, batch_size):
         raise InputError(f"batch_size = {batch_size!r} is out of range; valid range is None or integers >= 1")
     n = _batch_size(args, axes)
     n_pad = -n % len(devices)
+    if batch_size is None:
+        batch_size, n_pad = _sized(fn, args, axes, devices, n)
+    elif batch_size > 1 and batch_size >= (n + n_pad) // len(devices):
+        batch_size = None  # one chunk: the same program as all rows at once
     _, batched, replicated = _program(fn, axes, devices, batch_size)
     placed = _place_all(args, axes, batched, replicated, n_pad)  # local: nothing runs yet
     return _executable(fn, axes, devices, batch_size, placed, args), placed, n, n_pad
+
+
+# -- batch sizing ---------------------------------------------------------------------------
+
+
+def _host_available() -> int:
+    """The host's available memory, bytes (Linux's MemAvailable, else the free pages)."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, OSError, ValueError):
+        return HOST_CAP
+
+
+def _free_bytes(devices) -> int:
+    """Free memory of the tightest of this process's devices in `devices`, bytes: an
+    accelerator's `bytes_limit - bytes_in_use`, a host device's share of the host's
+    available memory (at most `HOST_CAP`, split between this process's host devices)."""
+    mine = [d for d in devices if d.process_index == jax.process_index()] or list(devices)
+    frees, host = [], 0
+    for device in mine:
+        try:
+            stats = device.memory_stats()
+        except Exception:  # noqa: BLE001  (a backend without statistics)
+            stats = None
+        if stats and "bytes_limit" in stats:
+            frees.append(int(stats["bytes_limit"]) - int(stats.get("bytes_in_use", 0)))
+        else:
+            host += 1
+    if host:
+        frees.append(min(_host_available(), HOST_CAP) // host)
+    return max(0, min(frees))
+
+
+def _budget(devices) -> int:
+    """The bytes a device's share of the batch may use: `HEADROOM` of its free memory; the
+    smallest over the processes when they compare their programs (all must choose alike)."""
+    budget = int(HEADROOM * _free_bytes(devices))
+    if not _compared(devices):
+        return budget
+    from jax.experimental import multihost_utils
+
+    every = multihost_utils.process_allgather(np.array([budget], np.int64))
+    return int(np.min(np.asarray(every)))
+
+
+def _total(mem) -> int:
+    """A compiled program's bytes: temporaries, outputs and arguments (less aliased ones)."""
+    return int(mem.temp_size_in_bytes + mem.output_size_in_bytes + mem.argument_size_in_bytes) - int(
+        mem.alias_size_in_bytes
+    )
+
+
+def _kinds(mem) -> np.ndarray:
+    return np.array([mem.temp_size_in_bytes, mem.output_size_in_bytes, mem.argument_size_in_bytes], float)
+
+
+def chunk_rows(n_local: int, per_row, fixed: float, budget: float) -> int | None:
+    """The rows a device vmaps at once: None for all `n_local`, else a chunk size.
+
+    **Arguments:** `per_row`: (temp, output, argument) bytes per row; `fixed`: the bytes
+    that do not grow with the rows; `budget`: the bytes the device may use.
+
+    All rows fit if fixed + n_local · (temp + output + argument) <= budget. Else chunks
+    of c rows need fixed + n_local · (output + argument) (every row's inputs and results)
+    + c · (temp + output + argument) (a chunk's work and its slices), and c is the largest
+    that fits, evened out so that equal chunks cover the rows (ceil(n_local / k) for k =
+    ceil(n_local / c) chunks), rounded up to a multiple of `ALIGN` rows where c allows
+    (then more chunks): a vectorized CPU loop computes its last rows apart, and aligned
+    chunks of an aligned batch give its rows bit for bit. A batch whose arguments and
+    outputs alone do not fit beside one row is an `InputError`.
+    """
+    temp, out, arg = (float(b) for b in per_row)
+    row = temp + out + arg
+    if row <= 0.0 or fixed + n_local * row <= budget:
+        return None
+    c = math.floor((budget - fixed - n_local * (out + arg)) / row)
+    if c < 1:
+        need = fixed + n_local * (out + arg) + row
+        raise InputError(
+            f"a batch of {n_local} rows per device needs {need / 2**30:.3g} GiB per device for its "
+            f"arguments and outputs alone, more than the {budget / 2**30:.3g} GiB sweep may use "
+            f"({HEADROOM:.0%} of the free memory); sweep fewer rows per call, over more devices, "
+            "or with fewer outputs per row (or pass batch_size to run anyway)"
+        )
+    k = math.ceil(n_local / c)
+    while True:
+        chunk = math.ceil(n_local / k)
+        if c >= ALIGN:
+            chunk = ALIGN * math.ceil(chunk / ALIGN)
+        if chunk <= c:
+            return chunk
+        k += 1
+
+
+def _row_key(fn, axes, devices, args) -> tuple:
+    """(fn, axes, device ids, the batched leaves' row types, the other leaves' types)."""
+    key: list = [fn, axes, tuple(d.id for d in devices)]
+    for arg, axis in zip(args, axes, strict=True):
+        leaves, treedef = jax.tree_util.tree_flatten(arg)
+        key.append(treedef)
+        for leaf in leaves:
+            a = np.asarray(leaf) if not isinstance(leaf, jax.Array) else leaf
+            shape = np.shape(a)[1:] if axis == 0 else np.shape(a)
+            key.append((shape, str(a.dtype)))
+    return tuple(key)
+
+
+def _probe(fn, axes, devices, args, rows: int):
+    """The memory analysis of the vmapped program for `rows` rows per device (compiled from
+    the arguments' types alone: nothing is placed)."""
+    jitted, batched, replicated = _program(fn, axes, devices, None)
+
+    def struct(leaf, axis):
+        a = leaf if isinstance(leaf, jax.Array) else jnp.asarray(leaf)
+        if axis == 0:
+            return jax.ShapeDtypeStruct((rows * len(devices), *a.shape[1:]), a.dtype, sharding=batched)
+        return jax.ShapeDtypeStruct(a.shape, a.dtype, sharding=replicated, weak_type=jax.typeof(a).weak_type)
+
+    structs = tuple(
+        jax.tree_util.tree_map(lambda leaf, axis=axis: struct(leaf, axis), arg)
+        for arg, axis in zip(args, axes, strict=True)
+    )
+    return jitted.lower(*structs).compile().memory_analysis()
+
+
+def _sized(fn, args, axes, devices, n: int) -> tuple[int | None, int]:
+    """`sweep`'s batch for `batch_size=None`: (rows a device vmaps at once, None for all;
+    the padding rows), see the module's docstring."""
+    d = len(devices)
+    n_pad = -n % d
+    n_local = (n + n_pad) // d
+    if batching_mode() != "batch" or n_local <= _SMALL:
+        return None, n_pad
+    key = _row_key(fn, axes, devices, args)
+    budget = _budget(devices)
+    chosen = _CHOSEN.get((key, n_local))
+    if chosen is not None and chosen[1] <= budget:
+        return chosen[0], _padding(n, d, chosen[0])
+    if key not in _SIZING:
+        _, batched, replicated = _program(fn, axes, devices, None)
+        placed = _place_all(args, axes, batched, replicated, n_pad)
+        full = _executable(fn, axes, devices, None, placed, args).memory_analysis()
+        if full is None:  # no memory analysis: all at once, as without sizing
+            return None, n_pad
+        points = _POINTS.setdefault(key, {})
+        points[n_local] = full
+        if _total(full) <= budget:
+            _CHOSEN[(key, n_local)] = (None, _total(full))
+            return None, n_pad
+        # The slope to another batch size's program: one measured before (a sweep of
+        # another size), else one compiled for `_PROBE` rows.
+        other = max((m for m in points if m != n_local), default=None)
+        if other is None:
+            other = _PROBE
+            points[other] = _probe(fn, axes, devices, args, other)
+        per_row = np.maximum((_kinds(full) - _kinds(points[other])) / (n_local - other), 0.0)
+        fixed = max(0.0, _total(points[other]) - other * float(np.sum(per_row)))
+        _SIZING[key] = (tuple(float(b) for b in per_row), fixed)
+    per_row, fixed = _SIZING[key]
+    chunk = chunk_rows(n_local, per_row, fixed, budget)
+    temp, out, arg = per_row
+    rows = n_local if chunk is None else chunk
+    need = fixed + n_local * (out + arg) + rows * (temp + (0.0 if chunk is None else out + arg))
+    _CHOSEN[(key, n_local)] = (chunk, need)
+    return chunk, _padding(n, d, chunk)
+
+
+def _padding(n: int, d: int, chunk: int | None) -> int:
+    """Padding rows for n rows on d devices in equal chunks of `chunk` rows per device."""
+    if chunk is None:
+        return -n % d
+    n_local = -(-n // d)
+    return d * chunk * math.ceil(n_local / chunk) - n
 
 
 def sweep_compiled(fn: Callable[..., Any], *args: Any, in_axes=0, devices=None, batch_size=None):
@@ -316,3 +546,13 @@ def sweep_compiled(fn: Callable[..., Any], *args: Any, in_axes=0, devices=None, 
     output and temporary buffer sizes.
     """
     return _prepare(fn, args, in_axes, devices, batch_size)[0]
+
+
+def batch_rows(fn: Callable[..., Any], *args: Any, in_axes=0, devices=None) -> int:
+    """The rows a device vmaps at once in `sweep(fn, *args, batch_size=None)`: all of its
+    rows, or the chunk that the free memory allows (compiling to measure, as `sweep` does)."""
+    axes = _normalize_axes(in_axes, len(args))
+    devices = tuple(jax.devices() if devices is None else devices)
+    n = _batch_size(args, axes)
+    chunk, n_pad = _sized(fn, args, axes, devices, n)
+    return (n + n_pad) // len(devices) if chunk is None else chunk
