@@ -1,11 +1,15 @@
 """`jaxunilat import wav|phyphox|video SOURCE --ball NAME --out DATA.csv`: recordings to data files.
 
-    jaxunilat import wav SOURCE.wav --ball NAME --out DATA.csv [--mass KG] [--diameter M] [--drag K]
+    jaxunilat import wav SOURCE.wav|.m4a|.mp3|... --ball NAME --out DATA.csv [--mass KG] [--diameter M] [--drag K]
                      [--air-density RHO] [--x0 H] [--v0 V] [--noise S] [--plot PNG]
                      [--threshold K] [--dead-time S] [--min-gap S]
     jaxunilat import phyphox SOURCE.csv|.xlsx --mass KG --diameter M --out DATA.csv [...]
     jaxunilat import video CLIP.mp4 --ball NAME --out DATA.csv [--color C] [--roi X0,Y0,X1,Y1] [--plot PNG]
-    jaxunilat import video SOURCE.csv --ball NAME --out DATA.csv [--column NAME] [--scale F] [...]
+    jaxunilat import video SOURCE.csv --ball NAME --out DATA.csv [--column NAME] [--scale F] [--fps F]
+                     [--flip] [--floor Y] [--measured scale,level] [...]
+
+`import audio` is another name for `import wav`: it reads every audio format (WAV by
+scipy; m4a/AAC, mp3, ogg, opus, flac, 3gp by PyAV, the `video` extra).
 
 The ball must be stated: `--ball NAME` (a preset of `identify.BALLS`), or `--mass`
 with `--diameter` (or `--drag`); `--mass`, `--diameter`, `--drag` override a preset's.
@@ -46,8 +50,8 @@ def _source_kind(sources, kind: str, *, source_help: str, x0_help: str, noise_he
         help="write the data file even when the recording is not one ball's drop test (onsets: intervals "
         "that do not decay, a broken ratio chain, a chain kept from a minority of the onsets, a flight longer "
         "than the ball allows, an estimated release higher than any drop test's; a clip: a track that does not "
-        "follow free flight, or a scale that disagrees with the ball's diameter); by default such an import is "
-        "refused with exit 3",
+        "follow free flight, or a scale that disagrees with the ball's diameter; a tracking table: heights that "
+        "point down, or free flight far from 9.81 m/s^2); by default such an import is refused with exit 3",
     )
     p.set_defaults(func=_run_import)
     return p
@@ -91,9 +95,9 @@ def register(commands) -> None:
     (the `jaxunilat.commands` entry point)."""
     p = commands.add_parser(
         "import",
-        help="turn a recording (WAV, phyphox export, video-tracking CSV) into a data file",
+        help="turn a recording (audio, phyphox export, video, video-tracking CSV) into a data file",
         description="Turn a real-world recording into a jaxunilat data file (format: data/README.md): impact "
-        "onsets from a WAV recording or a phyphox export, or a height trace from a video-tracking table. "
+        "onsets from an audio recording or a phyphox export, or a height trace from a video-tracking table. "
         "Prints the onsets kept and those left out with reasons; the source file is only read. The ball must be "
         "stated (--ball NAME, or --mass with --diameter or --drag): its mass and drag go into the data file.",
     )
@@ -102,16 +106,20 @@ def register(commands) -> None:
     w = _source_kind(
         sources,
         "wav",
-        source_help="the WAV file (only read)",
+        aliases=["audio"],
+        source_help="the recording (only read): WAV, or m4a, mp3, ogg, opus, flac, 3gp with PyAV",
         x0_help=_X0_IMPACTS,
         noise_help="onset-time standard deviation, s (default: the timing-noise estimate)",
-        help="impact onsets from a WAV recording of a bouncing ball",
-        description="Detect the impact clicks in a WAV file (PCM 16/24/32-bit or float 32/64-bit, mono or "
-        "stereo, 8-96 kHz) with one set of defaults for every recording: the noise floor is measured in the "
+        help="impact onsets from an audio recording of a bouncing ball (WAV, m4a, mp3, ...; alias: audio)",
+        description="Detect the impact clicks in a recording: a WAV file (PCM 8 to 64-bit, float 32/64-bit, "
+        "mu-law or A-law, any number of channels mixed to mono, 8-384 kHz), or m4a/AAC, mp3, ogg (Vorbis, "
+        'Opus), flac, 3gp decoded by PyAV (pip install "jaxunilat[video]"; or convert: ffmpeg -i IN -ac 1 '
+        "OUT.wav). A lossy codec at a low bit rate can move a click's onset early by its pre-echo: WAV or "
+        "FLAC keep every sample. One set of defaults for every recording: the noise floor is measured in the "
         "recording's quiet parts; a candidate click must RISE FROM BELOW (its first millisecond RISE times "
         "louder than the loudest of the 20 ms before, so the ringing after each click is a decaying "
         "threshold) and peak above THRESHOLD noise sigma; its onset is refined to the click's start (where "
-        "its envelope first exceeds 10%% of its own peak). The bounces are then the chain of candidates "
+        "its envelope first exceeds 10% of its own peak). The bounces are then the chain of candidates "
         "whose intervals shrink as a bouncing ball's do (successive ratios near a slowly drifting "
         "restitution; up to 2 missed quiet bounces in a row are inferred). Every other candidate is left "
         "out with its reason: sound before the drop (handling, the release), echoes and ringing closer than "
@@ -120,6 +128,7 @@ def register(commands) -> None:
         "timing-noise estimate (the scatter of the intervals about a smooth fit, /sqrt(2), at least one "
         "sample period).",
     )
+    w.set_defaults(source_kind="wav")  # `import audio` runs as `import wav`
     w.add_argument(
         "--threshold",
         type=float,
@@ -173,8 +182,10 @@ def register(commands) -> None:
         "checked against the ball's diameter), the contact level from where successive flights meet, and held "
         "frames before the release are left out; the data file names x0, v0, scale and level as estimated, so "
         'a fit frees them. Needs PyAV: pip install "jaxunilat[video]". A tracking CSV: a header row with '
-        "units (t (s), y (cm)), possibly after a preamble line such as Tracker's 'mass A'. Writes observe = "
-        "trace with t (s, 0 = the first kept frame, not the release) and x (m).",
+        "units (t (s), y (cm)), possibly after a preamble line such as Tracker's 'mass A', or frame numbers "
+        "with --fps; repeated rows are left out, and a table whose free flight curves upwards (image "
+        "coordinates: --flip) or falls far from 9.81 m/s^2 (a unit or frame-rate slip, named) is refused (exit "
+        "3). Writes observe = trace with t (s, 0 = the first frame kept, not the release) and x (m).",
     )
     v.add_argument("--color", metavar="C", help="clips: the ball's colour, a hint (a name, #rrggbb or r,g,b)")
     v.add_argument(
@@ -192,6 +203,37 @@ def register(commands) -> None:
         metavar="F",
         help="metres per unit of the height column (default: from the header unit m, cm or mm; required if "
         "the header has none)",
+    )
+    _table_arguments(v)
+
+
+def _table_arguments(v) -> None:
+    """A tracking table's time axis, orientation, floor and what was measured."""
+    v.add_argument(
+        "--fps",
+        type=float,
+        metavar="F",
+        help="tables: the clip's frame rate, frames/s, for a frame-number column (frame, n, index; t = frame / "
+        "F); required with one",
+    )
+    v.add_argument(
+        "--flip",
+        action="store_true",
+        help="tables: the heights point down (image coordinates, y down): height = -y, shifted so that the "
+        "contact level is 0; without it such a table is refused (exit 3)",
+    )
+    v.add_argument(
+        "--floor",
+        type=float,
+        metavar="Y",
+        help="tables: the contact level in the table's own units (e.g. the floor's pixel row): height = y - Y "
+        "(Y - y with --flip); default: as given (--flip: where the flights meet); a fit frees it anyway",
+    )
+    v.add_argument(
+        "--measured",
+        metavar="NAMES",
+        help="tables: scale and/or level, comma-separated, if a ruler and a floor line were measured: written "
+        "as measured (a fit holds them) instead of estimated (a fit frees them)",
     )
 
 
@@ -302,6 +344,7 @@ def _imported(args):
                 return import_phyphox(args.source, force=args.force, **common)
             return import_video(
                 args.source, column=args.column, scale=args.scale, color=args.color, roi=args.roi,
+                fps=args.fps, flip=args.flip, floor=args.floor, measured=args.measured,
                 force=args.force, **common,
             )  # fmt: skip
         except ImplausibleRecording as err:

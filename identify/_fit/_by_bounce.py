@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._trace_flights import apex_ratios
+from .._data._trace_flights import apex_ratios
 from ._uncertainty import Z95
 
 #: The fewest flights from which a between-flight scatter is estimated.

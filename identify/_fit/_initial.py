@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from ._trace_flights import apex_ratios, flight_meetings, trace_flights
+from .._data._trace_flights import apex_ratios, flight_meetings, trace_flights
 
 #: The contact-time prior, s: an assumed range, not a measurement.
 CONTACT_TIME_PRIOR = (0.5e-3, 2.0e-3)

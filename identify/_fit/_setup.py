@@ -18,6 +18,7 @@ import numpy as np
 
 from jaxunilat.internal import InputError
 
+from .._data._trace_flights import trace_release
 from ._initial import (
     CONTACT_TIME_GUESS,
     CONTACT_TIME_PRIOR,
@@ -37,7 +38,6 @@ from ._problem import (
     make_problem,
     to_z,
 )
-from ._trace_flights import trace_release
 
 #: Central-difference steps (scale and level have closed-form columns: unused there).
 _FD_STEP = {

@@ -4,10 +4,10 @@ At 24–60 fps a contact of a few ms falls between frames, and the frames near a
 are a poor guide to where it is: a band "within 2% of the span" merged flights at video
 rates (closed-form starts of 0.22–0.50 for a truth of 0.72–0.79). Here each complete
 flight gets its own least-squares parabola from the samples away from its two contacts,
-and a contact is where two successive parabolas meet (time and height). The meeting
-times are impact times like a microphone's onsets, so the per-bounce restitution follows
-from the flight times with drag (`bounce_restitution`) and needs neither the length
-scale nor the contact level.
+and a contact is where two successive parabolas meet (time and height). Successive
+flights' apex heights give the per-bounce restitution with drag (`apex_ratios`), and a
+drop's first fall its release (`trace_release`). Plain NumPy: the importers' checks and
+the fit's closed-form starts share it.
 """
 
 from __future__ import annotations
@@ -90,33 +90,6 @@ def flight_meetings(fits: list[Flight], t) -> list[tuple[int, float, float]]:
             if abs(at - t[f1.last]) <= 2 * dt:
                 out.append((f1.last, at, float(q1(at))))
     return out
-
-
-def trace_bounce_restitution(t, x, *, drag: float, gravity: float) -> np.ndarray:
-    """Per-bounce e of a drop trace from its impact times (where successive parabolas
-    meet), drag-corrected (`bounce_restitution`), over runs of at least 3 successive
-    impacts; an empty array where the trace has none."""
-    from ._restitution import bounce_restitution
-
-    fits = trace_flights(t, x)
-    meetings = flight_meetings(fits, t)
-    rows = [row for row, _, _ in meetings]
-    times = np.array([at for _, at, _ in meetings])
-    # A run breaks where a flight between two meetings had no parabola of its own.
-    following = {f.first: f.last for f in fits}
-    out = []
-    start = 0
-    for k in range(1, len(rows) + 1):
-        if k == len(rows) or following.get(rows[k - 1]) != rows[k]:
-            run = times[start:k]
-            if run.size >= 3 and np.all(np.diff(run) > 0):
-                try:
-                    e = bounce_restitution(run, drag=drag, gravity=gravity).restitution
-                except ValueError:
-                    e = []
-                out.extend(float(v) for v in np.asarray(e) if math.isfinite(v) and 0 < v < 1.5)
-            start = k
-    return np.asarray(out)
 
 
 def apex_ratios(t, x, *, level: float, scale: float, drag: float, gravity: float) -> np.ndarray:
