@@ -58,6 +58,7 @@ class Options:
     tol: float = 1e-10
     alone_starts: bool = True
     defer_alone: bool = False  # leave each file's "alone" e to the caller (law="auto")
+    from_closed_form: bool = False  # the restart after a contradicted fit (`identify._pipeline`)
 
 
 def load_all(data) -> list:

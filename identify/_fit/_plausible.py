@@ -55,15 +55,16 @@ class ClosedForm:
         return 1.2533 * self.spread / math.sqrt(max(self.count, 1))
 
 
-def closed_form(d) -> ClosedForm | None:
-    """The closed-form restitution of an impacts data set `d` of a drop; None where the
-    file has no closed form (another observation or scene, too few onsets)."""
+def closed_form(d, rows: int | None = None) -> ClosedForm | None:
+    """The closed-form restitution of an impacts data set `d` of a drop (of its first `rows`
+    onsets: a fit restricted to the speed range where e is constant); None where the file
+    has no closed form (another observation or scene, too few onsets)."""
     from .._data._import import ratio_chain
     from ._restitution import bounce_restitution
 
-    if d.observe != "impacts" or d.scene != "drop" or len(d.t) < MIN_ONSETS:
+    if d.observe != "impacts" or d.scene != "drop" or len(d.t[:rows]) < MIN_ONSETS:
         return None
-    t = np.asarray(d.t, dtype=float)
+    t = np.asarray(d.t[:rows], dtype=float)
     if np.any(np.diff(t) <= 0):
         return None
     drop = float(d.x0) if d.v0 == 0 and d.x0 > 0 else None
@@ -109,14 +110,14 @@ def contradictions(result) -> list[str]:
     """
     out = []
     files = result.datasets_data or []
-    forms = [closed_form(d) for d in files]
+    forms = _forms(result)
     fitted_x0 = "x0" in result.free
+    missed = {f: (e_fit, tol) for f, e_fit, tol in _basin_misses(result, forms)}
     for f, (d, form) in enumerate(zip(files, forms, strict=True)):
         if form is None:
             continue
-        e_fit = _file_restitution(result, f, len(files))
-        tol = _tolerance(result.law, form)
-        if e_fit is not None and not abs(e_fit - form.restitution) <= tol:
+        if f in missed:
+            e_fit, tol = missed[f]
             out.append(
                 f"{_name(d, f)}: the fit's e = {e_fit:.4f} contradicts the e = {form.restitution:.4f} "
                 f"(± {tol:.3f}) that the file's own flight times give in closed form (drag-corrected "
@@ -140,6 +141,51 @@ def contradictions(result) -> list[str]:
                 f"{min(known):.4f}-{max(known):.4f}"
             )
     return out
+
+
+def _forms(result) -> list:
+    """Each file's closed form, over the rows the fit used where a trend of e with impact
+    speed restricted it (`result.trends`)."""
+    files = result.datasets_data or []
+    used = {t.get("file"): t["rows_used"][1] + 1 for t in getattr(result, "trends", None) or []}
+    return [closed_form(d, used.get(f)) for f, d in enumerate(files)]
+
+
+def _basin_misses(result, forms) -> list[tuple[int, float, float]]:
+    """(file, fitted e, tolerance) of every file whose fitted e lies beyond the tolerance of
+    its closed form."""
+    out = []
+    files = result.datasets_data or []
+    for f, form in enumerate(forms):
+        if form is None:
+            continue
+        e_fit = _file_restitution(result, f, len(files))
+        tol = _tolerance(result.law, form)
+        if e_fit is not None and not abs(e_fit - form.restitution) <= tol:
+            out.append((f, e_fit, tol))
+    return out
+
+
+def wrong_basin(result) -> bool:
+    """Whether the fit sits in a wrong basin that the closed form can lead out of: a file's
+    fitted e contradicts a sound closed form (`contradictions`' "wrong basin"), or the fit
+    is a misfit of its noise (residuals no ball's scatter explains) while every file is
+    impact onsets with a sound closed form (an e of 1.0000 for the flights' 0.987 is within
+    0.03, yet its onsets miss by seconds). Sound: the flights' own e scatter by no more than
+    a ball's bounce-to-bounce variation (`MAX_E_VARIATION`); a closed form that scatters
+    more is no reference to restart from. Then a fit restarted from the closed form
+    (`identify._pipeline`) can reach the basin the flights give."""
+    from ._robust import MAX_E_VARIATION
+
+    forms = _forms(result)
+
+    def sound(form):
+        return form is not None and form.spread <= MAX_E_VARIATION * form.restitution
+
+    if any(sound(forms[f]) for f, _, _ in _basin_misses(result, forms)):
+        return True
+    misfit = (result.noise or {}).get("verdict") == "misfit"
+    return bool(misfit and forms and all(sound(form) for form in forms))
 
 
 #: A trace whose first this-many rows are all outliers starts with something the fit

@@ -22,11 +22,14 @@ every entry located), [K90 §6]:
 - `trace`: the position level + scale · x at the sample times (minus the clock offset,
   when a video's time origin is unknown: frames before the release see the ball held
   at x0);
-- `impacts`: the contact onset times, plus the recording's unknown time offset. Each
-  observed onset is matched to the *nearest* predicted onset (the model predicts a few
-  more onsets than observed), so a missed quiet bounce costs nothing and a spurious
-  click is one large residual that the robust pass excludes, instead of shifting every
-  later onset by one bounce;
+- `impacts`: the contact onset times, plus the recording's unknown time offset. Where
+  the onsets' own ratio chain counts the bounces (a drop whose chain is not broken,
+  missed bounces included: `bounce`), each observed onset is matched to *its own*
+  predicted bounce, so no drift of the prediction can slip it onto a neighbour's;
+  otherwise to the *nearest* predicted onset (the model predicts a few more onsets than
+  observed), so a missed quiet bounce costs nothing and a spurious click is one large
+  residual that the robust pass excludes, instead of shifting every later onset by one
+  bounce;
 - `apex`: the rebound apex heights (apexes after the first impact).
 
 Two contact laws can be fitted (`LAWS`): the paper's Kelvin–Voigt law (κ in N/m, k_r in
@@ -128,6 +131,7 @@ class Problem(eqx.Module):
     y_obs: Array
     sigma: Array
     horizon: Array
+    bounce: Array  # impacts: each row's predicted bounce (0 = the first impact), or -1: nearest
 
     def ball(self, z) -> ju.Ball:
         walls = (0.0, None) if self.scene == "drop" else (-self.half_gap, self.half_gap)
@@ -163,7 +167,13 @@ class Problem(eqx.Module):
             sol = ju.simulate(ball, y0, self.horizon, ts=ts, outputs=("x",), **common)
             if self.observe == "impacts":
                 onsets = ju.impact_times(sol, self.n_events + EXTRA_ONSETS) + z[5]
-                pred = _nearest(jnp.where(jnp.isfinite(onsets), onsets, jnp.inf), self.y_obs)
+                onsets = jnp.where(jnp.isfinite(onsets), onsets, jnp.inf)
+                index = self.bounce.astype(jnp.int32)
+                own = jnp.take(onsets, jnp.clip(index, 0, onsets.shape[0] - 1))
+                # A bounce the run did not reach (a trial point whose ball runs late) is
+                # predicted at the run's end: a large residual, not a failed point.
+                own = jnp.where(jnp.isfinite(own), own, self.horizon + z[5])
+                pred = jnp.where(index >= 0, own, _nearest(onsets, self.y_obs))
             else:
                 onsets = ju.impact_times(sol, 1)
                 times, heights = ju.apexes(sol, self.n_events + 2)
@@ -246,12 +256,15 @@ def make_problem(
     shift_trace: bool = False,
     rows: int | None = None,
     max_steps: int | None = None,
+    bounce=None,
 ):
     """A `Problem` for a loaded `identify.Dataset`.
 
     `rows` pads the observations to that many (repeating the last one; the fit gives
     padded rows no weight) so that data sets of one structure stack into one batch;
-    `max_steps` overrides the step budget (a batch uses its largest).
+    `max_steps` overrides the step budget (a batch uses its largest). `bounce` (impact
+    onsets): each onset's predicted bounce (0-based, below `len(t) + EXTRA_ONSETS`), or
+    None: every onset is matched to the nearest predicted one.
     """
     if data.observe == "trace":
         y_obs, t_obs, n_events = data.x, data.t, 0
@@ -265,10 +278,12 @@ def make_problem(
         horizon = float(t_obs[-1]) if data.observe == "trace" else 1.0
     if max_steps is None:
         max_steps = default_max_steps(n_events, horizon)
+    bounce = np.full(len(y_obs), -1.0) if bounce is None else np.asarray(bounce, dtype=float)
     if rows is not None and rows > len(y_obs):
         pad = rows - len(y_obs)
         y_obs = np.concatenate([y_obs, np.repeat(y_obs[-1:], pad)])
         t_obs = np.concatenate([t_obs, np.repeat(t_obs[-1:], pad)])
+        bounce = np.concatenate([bounce, np.repeat(bounce[-1:], pad)])
         n_events = rows if n_events else 0
     return Problem(
         scene=data.scene,
@@ -287,6 +302,7 @@ def make_problem(
         y_obs=_device(y_obs),
         sigma=_device(sigma),
         horizon=_device(horizon),
+        bounce=_device(bounce),
     )
 
 

@@ -27,6 +27,7 @@ is declared identifiable. A σ overstated by a large factor (p > 1 − 1e-3, red
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import numpy as np
@@ -79,12 +80,19 @@ class Rows:
     """Which data rows a stage uses, per file, as boolean masks over the concatenated rows.
 
     **Fields:** `offsets`, the first row of each file; `holdout`, rows kept out of the fit
-    (the last fraction of each file); `outlier`, rows excluded by the robust pass.
+    (the last fraction of each file); `outlier`, rows excluded by the robust pass;
+    `slow`, the onsets of bounces below the speed range where the file's e is constant
+    (`identify._fit._trend`), left out before the fit and predicted.
     """
 
     offsets: np.ndarray
     holdout: np.ndarray
     outlier: np.ndarray
+    slow: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.slow is None:
+            self.slow = np.zeros_like(self.holdout)
 
     @classmethod
     def make(cls, n_rows: list[int], holdout: float) -> Rows:
@@ -97,7 +105,7 @@ class Rows:
 
     @property
     def fitted(self) -> np.ndarray:
-        return ~self.holdout & ~self.outlier
+        return ~self.holdout & ~self.outlier & ~self.slow
 
     def of_file(self, f: int) -> slice:
         return slice(int(self.offsets[f]), int(self.offsets[f + 1]))
@@ -147,11 +155,61 @@ class RatioResiduals:
     with t the observed and p the predicted onsets, T and P their intervals; rows not
     kept are zero (they carry no weight). All rows are dimensionless, on the scale of the
     relative bounce-to-bounce variation δe/e.
+
+    **Timing noise.** With a stated timing noise (`timing`, s) each onset's error moves
+    the rows too, by δt/T: little on long flights, much on short ones (0.5 ms on a 16 ms
+    flight is 3% of e, ten times a ball's scatter), and successive rows share an onset.
+    The rows of `whiten` (default: every kept row) are then whitened jointly with the
+    covariance s² I + timing² S Sᵀ (S: the rows' derivatives by the observed onsets,
+    `sensitivity`; s = `scatter`, the ball's relative scatter), to variance s² I: the
+    fitted scale is still the relative scatter of e. Without a stated noise nothing is
+    whitened.
     """
 
     times: np.ndarray
     keep: np.ndarray
     sigma: float
+    timing: float = 0.0
+    scatter: float = 0.0
+    whiten: np.ndarray | None = None
+
+    @functools.cached_property
+    def _whitened(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(the whitened rows, L⁻¹ with L Lᵀ = I + (timing/s)² S Sᵀ), or None where nothing is
+        whitened: rows of variance s² I + timing² S Sᵀ come out with variance s² I."""
+        if not (self.timing > 0 and self.scatter > 0):
+            return None
+        mask = self.keep if self.whiten is None else self.keep & self.whiten
+        idx = np.flatnonzero(self.keep)
+        rows = np.flatnonzero(mask)
+        if rows.size < 2:
+            return None
+        sens = self.sensitivity()[np.searchsorted(idx, rows)]
+        ratio = self.timing / self.scatter
+        cov = np.eye(len(rows)) + ratio * ratio * (sens @ sens.T)
+        chol = np.linalg.cholesky(cov)
+        return rows, np.linalg.solve(chol, np.eye(len(rows)))
+
+    def sensitivity(self) -> np.ndarray:
+        """(kept rows, onsets): each row's derivative by the observed onset times (the
+        predicted ones held), to first order."""
+        idx = np.flatnonzero(self.keep)
+        t = self.times
+        out = np.zeros((idx.size, len(t)))
+        if idx.size < 2:
+            return out
+        out[0, idx[0]] = -1.0 / (t[idx[1]] - t[idx[0]])
+        before = None
+        for row, (a, b) in enumerate(zip(idx[:-1], idx[1:], strict=True), start=1):
+            gap = t[b] - t[a]
+            out[row, b] -= 1.0 / gap
+            out[row, a] += 1.0 / gap
+            if before is not None:
+                prev, prev_gap = before
+                out[row, a] += 1.0 / prev_gap
+                out[row, prev] -= 1.0 / prev_gap
+            before = (a, gap)
+        return out
 
     def __call__(self, r: np.ndarray, jac: np.ndarray):
         idx = np.flatnonzero(self.keep)
@@ -174,6 +232,10 @@ class RatioResiduals:
             else:
                 out[b], dout[b] = log_ratio - prev_log, grad - prev_grad
             prev_log, prev_grad = log_ratio, grad
+        whitened = self._whitened
+        if whitened is not None:
+            rows, w = whitened
+            out[rows], dout[rows] = w @ out[rows], w @ dout[rows]
         return out, dout
 
 

@@ -29,6 +29,7 @@ from ._initial import (
 from ._joint import JointEvaluator, Layout, make_groups
 from ._kelvin_voigt import parameters_from_restitution
 from ._problem import (
+    EXTRA_ONSETS,
     LOG_PARAMETERS,
     NEUTRAL,
     PARAMETERS,
@@ -160,6 +161,10 @@ def _file_values(d, initial: dict, nuisance: tuple[str, ...]) -> tuple[dict, flo
         # Just past the last observed impact (a longer run only adds ever shorter bounces).
         last_flight = float(d.t[-1] - d.t[-2])
         horizon = float(d.t[-1]) - values["offset"] + 0.5 * last_flight + 0.05
+        if onset_bounces(d) is not None:
+            # Each onset is matched to its own bounce, which must be predicted: room for a
+            # start (or a trial step) whose bounces run late by a tenth of the recording.
+            horizon += COUNTED_MARGIN * float(d.t[-1] - d.t[0])
     elif d.observe == "apex":
         fall = first_impact_time(d.x0, d.v0, g) if d.scene == "drop" else 0.0
         flights = 2.0 * np.sqrt(2.0 * np.asarray(d.h) / g)
@@ -287,6 +292,34 @@ def _e_source(datasets) -> str:
     return "closed form (" + ", ".join(what) + ")" + median
 
 
+#: The fewest onsets whose ratio chain is trusted to count the bounces (3 flights).
+MIN_COUNTED_ONSETS = 4
+#: The prediction of counted onsets runs this fraction of the recording's span past its
+#: last onset.
+COUNTED_MARGIN = 0.1
+
+
+def onset_bounces(d) -> np.ndarray | None:
+    """Each onset's bounce (0 = the first impact after the release), counted by the
+    onsets' own ratio chain (an interval that spans m flights follows m − 1 unheard
+    bounces), or None where the chain cannot count them: not a drop recorded as impact
+    onsets, fewer than `MIN_COUNTED_ONSETS`, a broken chain (a spurious or mistimed onset:
+    then each onset is matched to the nearest predicted one), or more unheard bounces than
+    the prediction has room for."""
+    from .._data._import import ratio_chain
+
+    if d.observe != "impacts" or d.scene != "drop" or len(d.t) < MIN_COUNTED_ONSETS:
+        return None
+    t = np.asarray(d.t, dtype=float)
+    if np.any(np.diff(t) <= 0):
+        return None
+    chain = ratio_chain(t)
+    if not math.isfinite(chain.restitution) or np.any(chain.broken):
+        return None
+    index = np.concatenate([[0], np.cumsum(chain.spans)])
+    return index if index[-1] < len(t) + EXTRA_ONSETS else None
+
+
 def _padded_problems(datasets, per_file, rows, *, law, has_drag, sigmas, tol, shift_trace):
     """One Problem per file, padded so that files of one structure stack."""
     keys = [(d.scene, d.observe) for d in datasets]
@@ -310,6 +343,7 @@ def _padded_problems(datasets, per_file, rows, *, law, has_drag, sigmas, tol, sh
                 shift_trace=shift_trace and d.observe == "trace",
                 rows=pad,
                 max_steps=budget[k] if len(datasets) > 1 else None,
+                bounce=onset_bounces(d),
             )
         )
     return out

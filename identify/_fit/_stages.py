@@ -35,7 +35,15 @@ from ._gradient import gradient_step, run_gradient_stage
 from ._initial import CONTACT_TIME_GUESS
 from ._lm import LMPoint, levenberg_marquardt
 from ._robust import RatioResiduals, cauchy_weights, flag_outliers, robust_scale
-from ._setup import start_point
+from ._setup import onset_bounces, start_point
+from ._trend import (
+    MIN_BOUNCES,
+    SCATTER_FLOOR,
+    of_dataset,
+    reml_components,
+    restitution_trend,
+    scatter_evident,
+)
 from ._uncertainty import covariance, goodness_of_fit
 
 _WINDOWS = (0.35, 0.65, 1.0)
@@ -223,24 +231,151 @@ def scatter_model_applies(setup, best: Point, rows) -> bool:
     return g["consistent"] is False
 
 
-def ratio_transforms(setup, rows) -> dict:
-    """Every file's log-ratio rows of `RatioResiduals` (kept rows: not outliers), as the
-    evaluator's `transforms`.
+def counted(setup) -> bool:
+    """Whether every file is a drop recorded as impact onsets whose own ratio chain counts
+    the bounces (each onset matched to its own predicted bounce: `_setup.onset_bounces`)."""
+    return all(onset_bounces(d) is not None for d in setup.datasets)
+
+
+def speed_trends(setup) -> list:
+    """Each file's trend of e with impact speed (`_trend.restitution_trend`), or None."""
+    return [restitution_trend(d) for d in setup.datasets]
+
+
+def leave_out_slow(setup, rows, trends):
+    """`rows` with the onsets below each file's constant-e speed range marked `slow`."""
+    slow = rows.slow.copy()
+    for f, trend in enumerate(trends):
+        if trend is not None and trend.rows is not None:
+            sl = rows.of_file(f)
+            slow[sl] = np.arange(setup.n_rows[f]) >= trend.rows
+    return dataclasses.replace(rows, slow=slow)
+
+
+def _file_ratios(setup, rows, f):
+    """File f's closed-form flight ratios (`_trend.flight_ratios`) and the bounces whose
+    three onsets are all fitted, or (None, None)."""
+    d = setup.datasets[f]
+    ratios = of_dataset(d)
+    if ratios is None:
+        return None, None
+    fitted = rows.fitted[rows.of_file(f)]
+    k = ratios.onset
+    keep = fitted[k - 1] & fitted[k] & fitted[np.minimum(k + 1, len(fitted) - 1)] & (k + 1 < len(fitted))
+    return ratios, keep
+
+
+def scatter_from_start(setup, rows) -> bool:
+    """Whether the fit uses the flights' log ratios from its first stage: every file's
+    onsets are counted (no drift can slip an onset onto another bounce), and some file's
+    own flights scatter beyond its timing noise (`_trend.scatter_evident`; always without
+    a stated noise), so that onset residuals of a constant e are a random walk that a
+    least-squares stage on the onsets would bend the contact time and the release to
+    follow."""
+    if not counted(setup):
+        return False
+    if not setup.sigma_known:
+        return True
+    for f in range(setup.layout.n_files):
+        ratios, keep = _file_ratios(setup, rows, f)
+        if ratios is not None and keep.sum() >= MIN_BOUNCES and scatter_evident(ratios, keep):
+            return True
+    return False
+
+
+#: The relative scatter of e a ratio row's weights assume where the flights cannot measure
+#: it (a real ball's: 0.2-0.5%).
+TYPICAL_SCATTER = 0.003
+
+
+def closed_scatter(setup, rows) -> dict:
+    """Each file's (s, σ): the relative bounce-to-bounce scatter of e and the timing noise
+    (at most the stated one) that its own flights show (`_trend.FlightRatios.components`,
+    about a constant e), for the weights of its log-ratio rows; where the flights cannot
+    measure them, a typical ball's scatter and the stated noise."""
+    out = {}
+    for f in range(setup.layout.n_files):
+        ratios, keep = _file_ratios(setup, rows, f)
+        stated = float(setup.sigmas[f]) if setup.sigma_known else 0.0
+        if ratios is not None and keep.sum() >= MIN_BOUNCES:
+            s, sigma = ratios.components(keep)
+            out[f] = (max(s, SCATTER_FLOOR), sigma if setup.sigma_known else 0.0)
+        else:
+            out[f] = (TYPICAL_SCATTER, stated)
+    return out
+
+
+def ratio_transforms(setup, rows, scatter: dict | None = None) -> dict:
+    """Every file's log-ratio rows of `RatioResiduals` (kept rows: not outliers, not below
+    the file's constant-e speed range), as the evaluator's `transforms`.
 
     A last onset that follows an unheard bounce (its interval spans several flights of
     the ratio chain) is left out of the log-ratio rows: under restitution scatter the
     predicted onsets drift, the nearest-onset matching can pair it with the bounce it
     skipped, and nothing after it would show that. It stays in the data, the onset
-    residuals and the plots.
+    residuals and the plots. With a stated timing noise the fitted rows are whitened
+    (`RatioResiduals`) with each file's (s, σ) in `scatter` (default: `closed_scatter`).
     """
+    scatter = closed_scatter(setup, rows) if scatter is None else scatter
     transforms = {}
     for f in range(setup.layout.n_files):
-        keep = ~rows.outlier[rows.of_file(f)]
+        sl = rows.of_file(f)
+        keep = ~rows.outlier[sl] & ~rows.slow[sl]
         kept = np.flatnonzero(keep)
         if len(kept) >= 4 and ratio_chain(setup.times[f][kept]).spans[-1] > 1:
             keep[kept[-1]] = False
-        transforms[f] = RatioResiduals(times=setup.times[f], keep=keep, sigma=float(setup.sigmas[f]))
+        s, sigma = scatter[f]
+        transforms[f] = RatioResiduals(
+            times=setup.times[f],
+            keep=keep,
+            sigma=float(setup.sigmas[f]),
+            timing=float(sigma) if setup.sigma_known else 0.0,
+            scatter=float(s),
+            whiten=~rows.holdout[sl],
+        )
     return transforms
+
+
+def refined_scatter(setup, point: Point, rows, transforms: dict) -> dict | None:
+    """Each file's (s, σ) re-estimated from its log-ratio rows at `point` (REML, σ at most
+    the stated noise), or None when none moves by more than 25% from what its rows were
+    weighted with (then the fit stands)."""
+    if not setup.sigma_known:
+        return None
+    r, _, _ = setup.with_evaluator(transforms={}, prior=False).evaluator(point.z)
+    offsets = np.concatenate([[0], np.cumsum(setup.n_rows)])
+    out, moved = {}, False
+    for f, tr in transforms.items():
+        rf = r[offsets[f] : offsets[f + 1]]
+        raw, _ = dataclasses.replace(tr, timing=0.0)(rf, np.zeros((len(rf), 0)))
+        mask = tr.keep & tr.whiten & rows.fitted[rows.of_file(f)]
+        if mask.sum() < MIN_BOUNCES:
+            out[f] = (tr.scatter, tr.timing)
+            continue
+        sens = tr.sensitivity()[np.searchsorted(np.flatnonzero(tr.keep), np.flatnonzero(mask))]
+        none = np.zeros((int(mask.sum()), 0))
+        s, sigma = reml_components(raw[mask], none, sens @ sens.T, float(setup.sigmas[f]))
+        s = max(s, SCATTER_FLOOR)
+        out[f] = (s, sigma)
+        floor = 0.05 * float(setup.sigmas[f])  # a timing noise this small whitens nothing
+        moved = (
+            moved
+            or abs(math.log(s / tr.scatter)) > math.log(1.25)
+            or abs(math.log(max(sigma, floor) / max(tr.timing, floor))) > math.log(1.25)
+        )
+    return out if moved else None
+
+
+def settle(setup, z, rows, opts) -> np.ndarray:
+    """z with its nuisance entries (release, clock offset) fitted while the contact is held
+    (loose LM): a start where the flights' own e holds while the release and the clock
+    follow it. z itself where nothing else is free or the step fails."""
+    contact = set(setup.layout.index[:, :2].ravel().tolist())
+    free = [j for j in setup.free if j not in contact]
+    if not free:
+        return z
+    out = lm(setup, z, row_weights(setup, rows), opts, dchi2=1e-2, free=free)
+    return out.z if math.isfinite(out.cost) else z
 
 
 def onset_point(setup, best: Point, onsets: Point) -> Point:

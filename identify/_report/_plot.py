@@ -197,10 +197,40 @@ def plot_restitution_of_fit(result, *, ax=None):
 
 def _restitution_panel(ax, result, key: _Key, points, curves) -> list:
     """e against impact speed, each file's bounces in its colour, the laws as black lines.
-    **Returns:** the curves' (name, colour, linestyle) for the legend."""
+
+    A file whose own flights show e changing with the impact speed (`result.trends`) gets
+    each side's mean e as a dotted step in its colour and the split speed as a dotted
+    vertical line; where the fit kept only the bounces above it (e falling at low speed),
+    the bounces below are open markers. **Returns:** the curves' (name, colour, linestyle)
+    for the legend."""
+    trends = {t.get("file", 0): t for t in getattr(result, "trends", None) or []}
     for f, _, p in points:
-        ax.plot(np.asarray(p.impact_speed, float), np.asarray(p.restitution, float), "o", ms=4,
-                color=key.colours[f], alpha=0.85 if key.n > 1 else 1.0)  # fmt: skip
+        v, e = np.asarray(p.impact_speed, float), np.asarray(p.restitution, float)
+        trend = trends.get(f)
+        slow = (
+            v < trend["speed"] if trend is not None and trend["direction"] == "falls at low speed" else v < 0
+        )
+        style = dict(ms=4, color=key.colours[f], alpha=0.85 if key.n > 1 else 1.0, ls="none")
+        ax.plot(v[~slow], e[~slow], "o", **style)
+        if slow.any():
+            ax.plot(v[slow], e[slow], "o", mfc="none", **style)
+    for f, trend in trends.items():
+        colour = key.colours[min(f, len(key.colours) - 1)]
+        speeds = np.concatenate([np.asarray(p.impact_speed, float) for g, _, p in points if g == f] or [[]])
+        if speeds.size == 0:
+            continue
+        cut = trend["speed"]
+        ax.plot([speeds.min(), cut, cut, speeds.max()],
+                [trend["e_below"], trend["e_below"], trend["e_above"], trend["e_above"]],
+                color=colour, ls=":", lw=1.2)  # fmt: skip
+        ax.axvline(cut, color=colour, ls=":", lw=0.8)
+        kept = " (fitted above)" if trend["direction"] == "falls at low speed" else ""
+        ax.annotate(f"e {trend['direction']}{kept}", (cut, trend["e_below"]), xytext=(4, -10),
+                    textcoords="offset points", fontsize=7, color=colour)  # fmt: skip
+    every = [np.asarray(p.impact_speed, float) for *_, p in points]
+    every = np.concatenate(every) if every else np.array([1.0])
+    if trends and every.size and every.min() > 0 and every.max() > 5 * every.min():
+        ax.set_xscale("log")  # the slow bounces, where e changes, would crowd at the axis
     laws = []
     for j, (name, (speeds, e)) in enumerate(curves.items()):
         ls = "-" if j == 0 else "--"

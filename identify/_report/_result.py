@@ -85,6 +85,12 @@ class FitResult:
     - `noise`: the stated σ against the residual scatter, in words (`noise["text"]`).
     - `holdout`: `{"fraction", "rows", "rms", "max", "within_noise", …}` in data units.
     - `robust`: the robust pass's loss, threshold and scale (None with keep_outliers).
+    - `trends`: one dict per file whose own flights show e changing with the impact speed
+      (`identify._fit._trend.restitution_trend`: `direction`, the splitting `speed`,
+      `e_above`, `e_below`, `z`, `bounces`, `rows_used` (first and last fitted row,
+      0-based), `rows`); JSON key `restitution_trend`.
+    - `restart`: where the first fit contradicted the data's closed form and the fit was
+      restarted from it (`{"first_restitution", "reasons", "accepted"}`), else None.
     - `simulations`: compiled evaluations (each 2q + 1 event-mode runs, q the free
       parameters other than the offset, whose Jacobian column needs no run); `wall_s`.
     """
@@ -130,6 +136,8 @@ class FitResult:
     notes: list = dataclasses.field(default_factory=list)
     contradictions: list = dataclasses.field(default_factory=list)
     withheld: dict = dataclasses.field(default_factory=dict)
+    trends: list = dataclasses.field(default_factory=list)
+    restart: dict | None = None
 
     def withhold(self, names, reason: str) -> None:
         """Mark `names` not identifiable, giving `reason` where their interval alone passed."""
@@ -270,6 +278,8 @@ class FitResult:
             "datasets": [_clean_json(d) for d in self.datasets],
             "holdout": None if self.holdout is None else _clean_json(self.holdout),
             "notes": list(self.notes),
+            "restitution_trend": _clean_json(self.trends),
+            "restart": None if self.restart is None else _clean_json(self.restart),
             "files": _clean_json(self.file_table()),
             "bounds": _clean_json(self.bounds()),
             "profile_kappa": None
