@@ -170,14 +170,14 @@ def source_text(path: str, importer: str, ball: str) -> str:
 
 
 def impacts_dataset(
-    times: np.ndarray, *, source: str, importer: str, ball: BallSpec, x0, v0, noise, x0_derived: bool = False
+    times: np.ndarray, *, source: str, importer: str, ball: BallSpec, x0, v0, noise
 ) -> tuple[Dataset, list[str]]:
     """An `observe = impacts` drop data set of the ball `ball`, with the importers' defaults, and the notes.
 
     `times` are the onsets (s, recording clock, strictly increasing, at least 2). An x0
-    that is None is estimated from the first interval; both it and an x0 the caller
-    derived (`x0_derived`: e.g. the apex before a late export's first bounce) are
-    written as estimated, so that a fit frees them.
+    that is None is estimated from the first interval and written as estimated, so that
+    a fit frees it. (A late export's apex, derived from a given x0, is held: freed, a fit
+    whose ratio rows leave out the release lost e's interval altogether.)
     """
     times = np.asarray(times, dtype=float)
     notes = []
@@ -185,7 +185,7 @@ def impacts_dataset(
         raise InputError(
             f"{source}: {len(times)} impact onset(s) kept; a data set of impacts needs at least 2"
         )
-    estimated = ("x0",) if x0 is None or x0_derived else ()
+    estimated = ("x0",) if x0 is None else ()
     if x0 is None:
         first = float(times[1] - times[0])
         e, why = ASSUMED_RESTITUTION, "assuming"

@@ -504,12 +504,9 @@ def import_phyphox(
     if fit is not None:
         estimate = fit.scatter / math.sqrt(2.0)
         method = "robust scatter of the intervals about a smooth fit, /sqrt(2); not written as noise"
-    given = x0
     if x0 is not None and not v0:
         x0 = _late_start(times_a, x0, spec.drag, notes, warnings)
-    ds, more = impacts_dataset(
-        times_a, source=name, importer="phyphox", ball=spec, x0=x0, v0=v0, noise=noise, x0_derived=x0 != given
-    )
+    ds, more = impacts_dataset(times_a, source=name, importer="phyphox", ball=spec, x0=x0, v0=v0, noise=noise)
     notes += more
     _noise_note(noise, notes)
     result = _table_result(
