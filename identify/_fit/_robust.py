@@ -266,7 +266,9 @@ def noise_statement(
     """
     unit = "s" if d_observe == "impacts" else "m"
     show = (lambda v: f"{v * 1e3:.3g} ms") if unit == "s" else (lambda v: f"{v * 1e3:.3g} mm")
-    judged = trace_structure(structure) if d_observe == "trace" and structure is not None else None
+    judged = None
+    if d_observe == "trace" and structure is not None:
+        judged = trace_structure({**structure, "scatter": scatter, "height": height})
     if not sigma_known:
         verdict = "estimated"
         text = f"no noise stated: sigma = residual scatter {show(scatter)}"
@@ -313,35 +315,51 @@ def noise_statement(
     return {"stated": stated, "scatter": scatter, "unit": unit, "verdict": verdict, "text": text}
 
 
+#: A drop trace whose residual scatter exceeds this fraction of its height scale shows no
+#: bounces to judge (a clean 1 kHz trace at 10.5 mm is 3.4% of its 0.305 m drop; pure noise
+#: of 0.25 m, 82%).
+MAX_TRACE_SCATTER = 0.1
+
+
 def trace_structure(structure: dict) -> tuple[bool, str] | None:
     """Whether a drop trace's excess residuals are the ball's bounce-to-bounce scatter:
-    (plausible, why), or None when fewer than two per-bounce e measure it.
+    (plausible, why), or None when fewer than two per-bounce e measure it. A residual
+    scatter beyond `MAX_TRACE_SCATTER` of the height scale is a misfit first: no bounce
+    stands out of it.
 
     The flights' own per-bounce e (closed form, `apex_ratios`) are the reference: a
     fitted e off their median by more than max(0.03, 4 standard errors of a median) is a
-    wrong fit; a spread beyond `MAX_E_VARIATION` is no ball's. Otherwise the excess is
-    what the bounces differ by, whether or not the residuals are bounce-locked.
+    wrong fit. Otherwise the excess is what the bounces differ by, whether or not the
+    residuals are bounce-locked. (Their spread is no verdict: with 10 mm of tracking
+    noise it reached 18% on a clean 1 kHz trace.)
     """
     e_b = np.asarray(structure["e_bounces"], dtype=float)
     if e_b.size < 2:
         return None
     median = float(np.median(e_b))
-    spread = float(np.std(e_b, ddof=1))
+    if e_b.size >= 5:  # robust: a flight split by noise gives one wild ratio
+        spread = float(1.4826 * np.median(np.abs(e_b - median)))
+    else:
+        spread = float(np.std(e_b, ddof=1))
     tolerance = max(0.03, 4.0 * 1.2533 * spread / math.sqrt(e_b.size))
+    scatter, height = structure.get("scatter"), structure.get("height")
+    if scatter is not None and height and scatter > MAX_TRACE_SCATTER * height:
+        return False, (
+            f"the bounces do not stand out of the residual scatter ({scatter * 1e3:.3g} mm, more than "
+            f"{MAX_TRACE_SCATTER:.0%} of the {height:.3g} m height scale): the model does not fit"
+        )
     e_fit = float(structure["e_fit"])
     listed = f"{e_b.size} per-bounce e from the flights' apexes, median {median:.4f}"
     if not abs(e_fit - median) <= tolerance:
         return False, (
             f"the fit's e = {e_fit:.4f} contradicts the {listed} (± {tolerance:.3f}): the model does not fit"
         )
-    if spread > MAX_E_VARIATION * median:
-        return False, (
-            f"the {listed} vary by {spread / median:.1%}, more than a ball's bounce-to-bounce variation "
-            f"({MAX_E_VARIATION:.0%}): the model does not fit"
-        )
     locked = structure.get("locked")
     follows = "" if locked is None else f"; the residuals follow the bounces (p = {locked:.2g})"
-    return True, f"the bounces vary by about {spread / median:.2%} ({listed}){follows}"
+    return (
+        True,
+        f"the per-bounce e spread by {spread / median:.2%}, tracking noise included ({listed}){follows}",
+    )
 
 
 def unstated_limit(observe: str, height: float | None) -> float | None:
