@@ -131,6 +131,16 @@ def contact_rows(t, x) -> np.ndarray:
     return contacts[(contacts > 0) & (contacts < len(x) - 1)]
 
 
+def bounce_spread(e_bounces) -> float:
+    """The standard deviation of per-bounce e (`apex_ratios`): 1.4826·MAD from five values
+    on (a flight split wrongly by noise gives one wild ratio), the sample standard deviation
+    below."""
+    e = np.asarray(e_bounces, dtype=float)
+    if e.size >= 5:
+        return float(1.4826 * np.median(np.abs(e - np.median(e))))
+    return float(np.std(e, ddof=1))
+
+
 def first_contact(t, x) -> int | None:
     """The row of a drop trace's first contact sample (`contact_rows`), or None."""
     contacts = contact_rows(t, x)

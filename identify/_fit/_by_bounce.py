@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._data._trace_flights import apex_ratios
+from .._data._trace_flights import apex_ratios, bounce_spread
 from ._uncertainty import Z95
 
 #: The fewest flights from which a between-flight scatter is estimated.
@@ -156,24 +156,16 @@ def restitution_spread(setup, z: np.ndarray) -> np.ndarray:
     return np.concatenate(out) if out else np.zeros(0)
 
 
-def _spread(values: np.ndarray) -> float:
-    """The per-bounce e's standard deviation: 1.4826·MAD from five values on (a flight
-    split wrongly by noise gives one wild ratio), the sample standard deviation below."""
-    if values.size >= 5:
-        return float(1.4826 * np.median(np.abs(values - np.median(values))))
-    return float(np.std(values, ddof=1))
-
-
 def widen_by_bounce(entry: dict, e_bounces: np.ndarray) -> dict | None:
     """e's entry with its 95% interval at least the bounces' own: ± t_{n−1} s/√n (s the
-    spread of the n per-bounce e, `_spread`), clipped to [0, 1]; None when fewer than 2
+    spread of the n per-bounce e, `bounce_spread`), clipped to [0, 1]; None when fewer than 2
     bounces measure the spread."""
     import scipy.stats
 
     n = e_bounces.size
     if n < 2:
         return None
-    half = float(scipy.stats.t.ppf(0.975, n - 1) * _spread(e_bounces) / np.sqrt(n))
+    half = float(scipy.stats.t.ppf(0.975, n - 1) * bounce_spread(e_bounces) / np.sqrt(n))
     lo, hi = entry["ci95"]
     value = entry["value"]
     if not (np.isfinite(lo) and np.isfinite(hi)) or half <= (hi - lo) / 2:

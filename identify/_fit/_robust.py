@@ -32,6 +32,7 @@ import math
 
 import numpy as np
 
+from .._data._trace_flights import bounce_spread
 from ._uncertainty import P_INCONSISTENT, goodness_of_fit
 
 #: The Cauchy loss's scale constant (95% asymptotic efficiency on Gaussian noise).
@@ -337,10 +338,7 @@ def trace_structure(structure: dict) -> tuple[bool, str] | None:
     if e_b.size < 2:
         return None
     median = float(np.median(e_b))
-    if e_b.size >= 5:  # robust: a flight split by noise gives one wild ratio
-        spread = float(1.4826 * np.median(np.abs(e_b - median)))
-    else:
-        spread = float(np.std(e_b, ddof=1))
+    spread = bounce_spread(e_b)
     tolerance = max(0.03, 4.0 * 1.2533 * spread / math.sqrt(e_b.size))
     scatter, height = structure.get("scatter"), structure.get("height")
     if scatter is not None and height and scatter > MAX_TRACE_SCATTER * height:
