@@ -53,13 +53,14 @@ m₁ and m₂ the effective mass is the reduced mass m₁m₂/(m₁ + m₂): pas
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
-from jaxunilat.internal import InputError, check_choice, check_range
+from jaxunilat.internal import InputError, check_choice, check_range, printable, shown
+
+from ._fit_json import check_fit_value, finite_number, parse_json
 
 MODES = ("direct", "standard")
 MATCHES = ("law", "rebound")
@@ -132,17 +133,23 @@ def nonadhesive_rebound(zeta: float) -> tuple[float, float]:
 def _load(fit_or_path) -> tuple[dict, str | None]:
     if isinstance(fit_or_path, (str, os.PathLike)):
         path = os.fspath(fit_or_path)
+        if os.path.isdir(path):
+            raise InputError(f"fit file {path!r} is a directory, not a JSON file")
         try:
             with open(path, encoding="utf-8") as fh:
-                return json.load(fh), path
+                text = fh.read()
         except FileNotFoundError:
             raise InputError(
                 f"fit file {path!r} not found; write it with `jaxunilat identify --json`"
             ) from None
-        except IsADirectoryError:
-            raise InputError(f"fit file {path!r} is a directory, not a JSON file") from None
-        except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        except UnicodeDecodeError as err:
             raise InputError(f"fit file {path!r} is not valid JSON ({err})") from None
+        except OSError as err:
+            raise InputError(f"fit file {path!r} cannot be read ({err.strerror or err})") from None
+        try:
+            return parse_json(text), path
+        except InputError as err:
+            raise InputError(f"fit file {path!r} is not valid JSON: {err}") from None
     if hasattr(fit_or_path, "to_json_dict"):
         return fit_or_path.to_json_dict(), None
     if isinstance(fit_or_path, dict):
@@ -154,15 +161,7 @@ def _load(fit_or_path) -> tuple[dict, str | None]:
 
 
 def _number(where: str, value, *, allow_none: bool = False) -> float | None:
-    if value is None and allow_none:
-        return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise InputError(f"fit JSON: {where} = {value!r} is not a number")
-    if not math.isfinite(value):
-        if allow_none:
-            return None
-        raise InputError(f"fit JSON: {where} = {value!r} is not finite")
-    return float(value)
+    return finite_number(f"fit JSON: {where}", value, allow_none=allow_none)
 
 
 def _estimate(section: dict, name: str, group: str) -> Estimate | None:
@@ -177,7 +176,7 @@ def _estimate(section: dict, name: str, group: str) -> Estimate | None:
     ci = entry.get("ci95")
     if ci is not None:
         if not isinstance(ci, (list, tuple)) or len(ci) != 2:
-            raise InputError(f"fit JSON: {where}.ci95 = {ci!r} must be [low, high] or null")
+            raise InputError(f"fit JSON: {where}.ci95 = {shown(ci)} must be [low, high] or null")
         lo = _number(f"{where}.ci95[0]", ci[0], allow_none=True)
         hi = _number(f"{where}.ci95[1]", ci[1], allow_none=True)
         ci = None if lo is None or hi is None else (min(lo, hi), max(lo, hi))
@@ -432,7 +431,9 @@ def _est(est: Estimate | None, factor: float = 1.0) -> str:
 
 
 def _xml_safe(text: str) -> str:
-    """An XML comment may not contain '--' (nor end with '-')."""
+    """An XML comment may not contain '--' (nor end with '-'), nor control characters (a
+    file name's newline or escape bytes: shown escaped, `printable`)."""
+    text = printable(text)
     while "--" in text:
         text = text.replace("--", "-")
     return text
@@ -557,6 +558,12 @@ def _read_fit(fit_or_path, mass: float | None) -> _Fit:
     if fit_mass is not None:
         fit_mass = _number("mass", fit_mass)
         check_range("mass (in the fit JSON)", fit_mass, lo=0.0, lo_open=True, unit="kg")
+        check_fit_value("fit JSON: mass", "mass", fit_mass)
+    check_fit_value("mass", "mass", mass)
+    for name, est in (("kappa", kappa), ("k_r", k_r), ("contact_time", tc_fit)):
+        group = "derived" if name == "contact_time" else "parameters"
+        if est is not None and (name != "kappa" or est.value > 0) and (name != "k_r" or est.value >= 0):
+            check_fit_value(f"fit JSON: {group}.{name}.value", name, est.value)
     if mass is None:
         if fit_mass is None:
             raise InputError("the fit JSON has no 'mass'; pass the ball's mass in kg (mass=..., or --mass M)")

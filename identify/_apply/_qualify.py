@@ -28,13 +28,14 @@ interval crosses a limit.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import os
 
 import numpy as np
 
-from jaxunilat.internal import InputError, check_range
+from jaxunilat.internal import InputError, check_range, shown
+
+from ._fit_json import as_float, check_fit_value, read_json
 
 #: The ITTF ball test: mass (kg), drop height (m), pass window (m), and drag (s/m).
 ITTF_MASS = 2.7e-3
@@ -321,9 +322,9 @@ def _finish(
 
 def _check_samples(samples, seed):
     if not isinstance(samples, (int, np.integer)) or isinstance(samples, bool) or samples < 20:
-        raise InputError(f"samples = {samples!r} is out of range; valid range is integers >= 20")
+        raise InputError(f"samples = {shown(samples)} is out of range; valid range is integers >= 20")
     if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
-        raise InputError(f"seed = {seed!r} is out of range; valid range is integers >= 0")
+        raise InputError(f"seed = {shown(seed)} is out of range; valid range is integers >= 0")
 
 
 def qualify(
@@ -374,7 +375,7 @@ def qualify(
     if stderr is None or (stderr[0] == 0 and stderr[1] == 0):
         return _finish(height, None, uncertainty="none (exact parameters)", samples=0, seed=None, **common)
     if len(stderr) != 2:
-        raise InputError(f"stderr = {stderr!r} must be a pair (s_kappa [N/m], s_k_r [N*s/m])")
+        raise InputError(f"stderr = {shown(stderr)} must be a pair (s_kappa [N/m], s_k_r [N*s/m])")
     check_range("stderr of kappa", stderr[0], lo=0.0, unit="N/m")
     check_range("stderr of k_r", stderr[1], lo=0.0, unit="N*s/m")
     check_range("correlation", correlation, lo=-1.0, hi=1.0)
@@ -414,38 +415,32 @@ def _number(fit, keys, where, *, required=True, positive=False):
     name = ".".join(keys)
     if node is not None and (isinstance(node, bool) or not isinstance(node, (int, float))):
         # A value of the wrong type is a damaged file, never "absent".
-        raise InputError(f"{where}: {name} = {node!r} must be a number")
-    if node is None or not math.isfinite(node):
+        raise InputError(f"{where}: {name} = {shown(node)} must be a number")
+    value = None if node is None else as_float(node)
+    if node is not None and value is None:  # an integer beyond float64
+        raise InputError(
+            f"{where}: {name} = {shown(node)} is out of range; valid range is finite float64 numbers "
+            "(magnitude below about 1.8e308)"
+        )
+    if value is None or not math.isfinite(value):
         if required:
-            raise InputError(f"{where}: {name} = {node!r} must be a finite number")
+            raise InputError(f"{where}: {name} = {shown(node)} must be a finite number")
         return None
-    if positive and not node > 0:
-        raise InputError(f"{where}: {name} = {node!r} is out of range; valid range is (0, inf)")
-    return float(node)
+    if positive and not value > 0:
+        raise InputError(f"{where}: {name} = {shown(node)} is out of range; valid range is (0, inf)")
+    return value
 
 
 def load_fit(path) -> dict:
     """Read and check a fit JSON written by `jaxunilat identify --json`.
 
     NaN/Infinity tokens are read as numbers (and then treated as missing where a
-    standard error may be missing). Raises `ValueError` naming the file and the entry.
+    standard error may be missing). Raises `ValueError` naming the file and the entry,
+    also for a file nested deeper than a fit's JSON or with a number beyond float64
+    (`_fit_json`).
     """
     name = os.fspath(path)
-    if os.path.isdir(name):
-        raise InputError(f"{name}: is a directory, not a fit JSON file")
-    try:
-        with open(name, encoding="utf-8-sig") as f:
-            text = f.read()
-    except FileNotFoundError:
-        raise InputError(f"{name}: no such file") from None
-    except UnicodeDecodeError:
-        raise InputError(f"{name}: not UTF-8 text; expected a fit JSON file") from None
-    except OSError as err:
-        raise InputError(f"{name}: cannot be read ({err.strerror or err})") from None
-    try:
-        fit = json.loads(text)
-    except json.JSONDecodeError as err:
-        raise InputError(f"{name}: line {err.lineno}: not valid JSON ({err.msg})") from None
+    fit = read_json(name)
     if not isinstance(fit, dict) or not isinstance(fit.get("parameters"), dict):
         raise InputError(
             f"{name}: not a fit JSON: expected an object with 'parameters' "
@@ -477,6 +472,7 @@ def qualify_fit(
     if not isinstance(fit, dict):
         fit = load_fit(fit)
     fit_mass = _number(fit, ("mass",), where, required=False, positive=True)
+    check_fit_value(f"{where}: mass", "mass", fit_mass)
     if mass is None:
         mass = ITTF_MASS if fit_mass is None else fit_mass
     _check_test(
@@ -488,7 +484,7 @@ def qualify_fit(
     law = fit.get("law", "kelvin-voigt")
     if law != "kelvin-voigt":
         raise InputError(
-            f"{where}: law = {law!r}: the rebound test is simulated with the Kelvin-Voigt law; "
+            f"{where}: law = {shown(law)}: the rebound test is simulated with the Kelvin-Voigt law; "
             "refit with --law kelvin-voigt to qualify"
         )
     ident = fit.get("identifiable")
@@ -496,7 +492,7 @@ def qualify_fit(
         isinstance(ident.get(k), bool) for k in ("kappa", "k_r", "restitution")
     ):
         raise InputError(
-            f"{where}: identifiable = {ident!r}: expected true/false for kappa, k_r and restitution "
+            f"{where}: identifiable = {shown(ident)}: expected true/false for kappa, k_r and restitution "
             "(as written by `jaxunilat identify --json`)"
         )
     required = ident["kappa"] and ident["k_r"]
@@ -504,6 +500,12 @@ def qualify_fit(
     k_r = _number(fit, ("parameters", "k_r", "value"), where, required=required, positive=True)
     s_kappa = _number(fit, ("parameters", "kappa", "stderr"), where, required=False)
     s_k_r = _number(fit, ("parameters", "k_r", "stderr"), where, required=False)
+    for name, value, stderr in (("kappa", kappa, s_kappa), ("k_r", k_r, s_k_r)):
+        check_fit_value(f"{where}: parameters.{name}.value", name, value)
+        if required and value is not None and stderr is not None:
+            # Drawn from: beyond 100 times the value the log-normal draws overflow float64.
+            unit = "N/m" if name == "kappa" else "N*s/m"
+            check_range(f"{where}: parameters.{name}.stderr", stderr, lo=0.0, hi=100 * value, unit=unit)
     notes = ()
     if fit.get("converged") is False:
         notes += ("the fit did not converge (converged = false): the verdict rests on an unconverged fit",)
@@ -535,8 +537,10 @@ def qualify_fit(
             "stderr); nothing to qualify"
         )
     if not 0 < e < 1:
-        raise InputError(f"{where}: derived.restitution.value = {e!r} is out of range; valid range is (0, 1)")
-    check_range(f"{where}: derived.restitution.stderr", s_e, lo=0.0)
+        raise InputError(
+            f"{where}: derived.restitution.value = {shown(e)} is out of range; valid range is (0, 1)"
+        )
+    check_range(f"{where}: derived.restitution.stderr", s_e, lo=0.0, hi=1.0)
     if fit_mass is None:
         raise InputError(
             f"{where}: mass is missing; a restitution-only fit needs the mass it was fitted at (kg)"
@@ -576,11 +580,11 @@ def _correlation(fit, where) -> float:
     corr = fit.get("correlation")
     try:
         c = np.array(corr, dtype=float)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         c = None
     if c is None or c.ndim != 2 or c.shape[0] != c.shape[1] or c.shape[0] < 2 or not np.all(np.isfinite(c)):
         raise InputError(
-            f"{where}: correlation = {corr!r} must be a square matrix (at least 2x2, order kappa, k_r, ...) "
+            f"{where}: correlation = {shown(corr)} must be a square matrix (at least 2x2, order kappa, k_r, ...) "
             "of finite numbers"
         )
     if (
@@ -589,6 +593,6 @@ def _correlation(fit, where) -> float:
         or np.any(np.abs(c) > 1 + 1e-9)
     ):
         raise InputError(
-            f"{where}: correlation = {corr!r} is not a correlation matrix (symmetric, unit diagonal, |rho| <= 1)"
+            f"{where}: correlation = {shown(corr)} is not a correlation matrix (symmetric, unit diagonal, |rho| <= 1)"
         )
     return float(np.clip(c[0, 1], -1.0, 1.0))

@@ -58,13 +58,13 @@ def register(commands) -> None:
 
 
 def _run_export_mujoco(args) -> int:
-    from jaxunilat.internal import EXIT_OK, PROG
+    from jaxunilat.internal import EXIT_OK, PROG, bounded_numbers, printable
 
     from .. import DEFAULT_IMPEDANCE, mujoco_contact
 
     impedance = DEFAULT_IMPEDANCE if args.impedance is None else args.impedance
     contact = mujoco_contact(args.fit, mass=args.mass, mode=args.mode, match=args.match, impedance=impedance)
     print(contact.mjcf())
-    for note in contact.notes:
-        print(f"{PROG}: warning: {note}", file=sys.stderr)
+    for note in contact.notes:  # one line each, whatever a file name in it holds
+        print(f"{PROG}: warning: {bounded_numbers(printable(' '.join(note.split())))}", file=sys.stderr)
     return EXIT_OK

@@ -139,7 +139,7 @@ def _checked_arguments(args) -> tuple[tuple[str, ...], tuple[str, ...], list[str
 def _run_identify(args) -> int:
     import json
 
-    from jaxunilat.internal import input_errors, output_errors, write_atomically
+    from jaxunilat.internal import input_errors, output_errors, printable, write_atomically
 
     from .. import fit, load_dataset
 
@@ -162,24 +162,34 @@ def _run_identify(args) -> int:
         holdout=args.holdout,
     )
     result.notes[:0] = [o["note"] for o in overrides.values()]
-    print(result.report())
-    with output_errors():
-        if args.json is not None:
-            doc = result.to_json_dict()
-            doc["overrides"] = {
-                name: {k: v for k, v in o.items() if k != "note"} for name, o in overrides.items()
-            }
+    print(_terminal(result.report()))
+    if args.json is not None:
+        doc = result.to_json_dict()
+        doc["overrides"] = {
+            name: {k: v for k, v in o.items() if k != "note"} for name, o in overrides.items()
+        }
+        with output_errors("--json", args.json):
             with write_atomically(args.json, encoding="utf-8") as fh:
                 json.dump(doc, fh, indent=2, allow_nan=False)
-            print(f"wrote {args.json}")
-        if args.plot is not None:
-            from jaxunilat.plot import save_figure
+        print(f"wrote {printable(args.json)}")
+    if args.plot is not None:
+        from jaxunilat.plot import save_figure
 
-            from ..plot import plot_fit
+        from ..plot import plot_fit
 
-            save_figure(plot_fit(result), args.plot)
-            print(f"wrote {args.plot}")
+        figure = plot_fit(result)
+        with output_errors("--plot", args.plot):
+            save_figure(figure, args.plot)
+        print(f"wrote {printable(args.plot)}")
     return _verdict(result)
+
+
+def _terminal(text: str) -> str:
+    """`text` line by line as the terminal gets it: control characters (a file name's
+    escape bytes) escaped, numbers of more than 16 digits shortened (a wild fit's e)."""
+    from jaxunilat.internal import bounded_numbers, printable
+
+    return "\n".join(bounded_numbers(printable(line)) for line in text.split("\n"))
 
 
 def _overridden(data: list, **values) -> tuple[list, dict]:
@@ -213,10 +223,11 @@ def _verdict(result) -> int:
 
     if result.contradictions:
         for reason in result.contradictions:
-            print(f"rejected: {reason}")
+            print(_terminal(f"rejected: {' '.join(str(reason).split())}"))
         print(f"the fit contradicts its own data (nothing is identifiable): exit status {EXIT_NOT_CONVERGED}")
         return EXIT_NOT_CONVERGED
     if not result.converged:
-        print(f"the fit did not converge ({result.message}): exit status {EXIT_NOT_CONVERGED}")
+        message = " ".join(str(result.message).split())
+        print(_terminal(f"the fit did not converge ({message}): exit status {EXIT_NOT_CONVERGED}"))
         return EXIT_NOT_CONVERGED
     return EXIT_OK

@@ -13,7 +13,9 @@ def register(commands) -> None:
         description="Simulate a standard rebound test with the event mode and print the rebound height "
         "with its 95% interval and a verdict: PASS (interval inside [min, max]), FAIL (estimate outside) "
         "or INCONCLUSIVE. Default: the ITTF ball test, a 2.7 g ball dropped from 0.305 m (its lowest "
-        "point) onto steel must rebound 0.240-0.260 m. Heights in m. Exit code 0 whatever the verdict.",
+        "point) onto steel must rebound 0.240-0.260 m. Heights in m. Exit code 0 whatever the verdict; "
+        "3 (and nothing simulated) for a fit that did not converge (its JSON says converged: false): refit, "
+        "or qualify chosen values with --kappa and --k-r.",
     )
     p.add_argument(
         "fit",
@@ -74,15 +76,43 @@ def _checked_arguments(args) -> None:
         check_output_paths(("--json", args.json), inputs=(("FIT.json", args.fit),))
 
 
+def _unconverged(path) -> str | None:
+    """Why the fit in `path` is refused: it says it did not converge (`converged: false`);
+    None for a fit that converged (or does not say)."""
+    from jaxunilat.internal import printable
+
+    from .._apply._qualify import load_fit
+
+    if load_fit(path).get("converged") is not False:
+        return None
+    return (
+        f"{printable(path)}: the fit did not converge (converged = false); its parameters are not an "
+        "estimate, so no verdict is given: refit (jaxunilat identify), or qualify chosen values with "
+        "--kappa K --k-r R"
+    )
+
+
 def _run_qualify(args) -> int:
     import json
+    import sys
     import time
 
-    from jaxunilat.internal import EXIT_OK, RunError, write_atomically
+    from jaxunilat.internal import (
+        EXIT_NOT_CONVERGED,
+        EXIT_OK,
+        PROG,
+        output_errors,
+        printable,
+        write_atomically,
+    )
 
     from .. import qualify, qualify_fit
 
     _checked_arguments(args)
+    refused = None if args.fit is None else _unconverged(args.fit)
+    if refused is not None:
+        print(f"{PROG}: error: {refused}", file=sys.stderr)
+        return EXIT_NOT_CONVERGED
     test = dict(
         drop=args.drop,
         min_height=args.min_height,
@@ -94,7 +124,7 @@ def _run_qualify(args) -> int:
     start = time.perf_counter()
     if args.fit is not None:
         result = qualify_fit(args.fit, mass=args.mass, **test)
-        source = args.fit
+        source = printable(args.fit)
     else:
         mass = {} if args.mass is None else {"mass": args.mass}
         result = qualify(args.kappa, args.k_r, **mass, **test)
@@ -104,12 +134,10 @@ def _run_qualify(args) -> int:
     print(result.report())
     print(f"{'wall time':<12}{wall:.2f} s (including JIT compilation)")
     if args.json is not None:
-        data = {"source": source, **result.to_dict()}
-        try:
+        data = {"source": args.fit if args.fit is not None else source, **result.to_dict()}
+        with output_errors("--json", args.json):
             with write_atomically(args.json, encoding="utf-8") as f:
                 json.dump(data, f, indent=2)
                 f.write("\n")
-        except OSError as err:
-            raise RunError(f"cannot write {args.json}: {err}") from None
-        print(f"{'wrote':<12}{args.json}")
+        print(f"{'wrote':<12}{printable(args.json)}")
     return EXIT_OK

@@ -29,8 +29,8 @@ Keys: `scene` (`drop`: one surface at x = 0, x the height of the ball's lowest p
 `rackets`: walls at ±gap/2), `observe` (`trace`: columns t,x; `impacts`: column t, the
 contact onset times; `apex`: column h, the rebound apex heights, and optionally t),
 `mass` (kg, > 0), `drag` (s/m, ≥ 0; 0 = no drag), `x0` (m), `v0` (m/s), `gap` (m, > 0;
-rackets only), `noise` (optional, > 0: the measurement standard deviation, m for trace
-and apex, s for impacts), `gravity` (optional, m/s², > 0, default 9.81), `estimated`
+rackets only), `noise` (optional: the measurement standard deviation, 1e-9 m to 1 m for
+trace and apex, 1e-7 s to 1 s for impacts; `NOISE_RANGE`), `gravity` (optional, m/s², > 0, default 9.81), `estimated`
 and `measured` (optional, comma-separated names from `x0`, `v0`, `scale`, `level`,
 no spaces: which of the release state and, for traces, the length scale and contact
 level were estimated rather than measured, or measured; a fit frees what was
@@ -49,7 +49,7 @@ import re
 
 import numpy as np
 
-from jaxunilat.internal import InputError, special_kind, write_atomically
+from jaxunilat.internal import InputError, printable, shown, special_kind, write_atomically
 
 #: The format version this module reads and writes.
 FORMAT_VERSION = 1
@@ -65,6 +65,10 @@ KEYS = (
 #: scale and contact level (the fit's nuisance parameters `scale` and `level`).
 PROVENANCE_NAMES = ("x0", "v0", "scale", "level")
 _LIST_KEYS = ("estimated", "measured")
+#: The physical range of `noise` by its unit, (lowest, highest): m for trace and apex
+#: (a nanometre to a metre), s for impacts (a tenth of a microsecond to a second). Beyond
+#: it a fit's weights overflow or vanish: the value is a slip, not a measurement.
+NOISE_RANGE = {"m": (1e-9, 1.0), "s": (1e-7, 1.0)}
 DEFAULT_GRAVITY = 9.81
 #: Columns per observation: (required, optional).
 COLUMNS = {"trace": (("t", "x"), ()), "impacts": (("t",), ()), "apex": (("h",), ("t",))}
@@ -81,7 +85,7 @@ _NUMERIC_KEYS = {
     "x0": ("m", None, False),
     "v0": ("m/s", None, False),
     "gap": ("m", 0.0, True),
-    "noise": ("m or s", 0.0, True),
+    "noise": ("m or s", None, False),  # its range by the observation: `_validate_noise`
     "gravity": ("m/s^2", 0.0, True),
 }
 
@@ -99,8 +103,8 @@ class Dataset:
     - `drag`: k = 1/v_max, s/m, ≥ 0 (0 = no drag).
     - `x0`, `v0`: the state at t = 0 (the release), m and m/s.
     - `gap`: m, > 0; required for rackets, `None` for drop.
-    - `noise`: the measurement standard deviation if known (m for trace and apex,
-      s for impacts), > 0, or `None`.
+    - `noise`: the measurement standard deviation if known, or `None`: 1e-9 m to 1 m
+      for trace and apex, 1e-7 s to 1 s for impacts (`NOISE_RANGE`).
     - `gravity`: m/s², > 0 (default 9.81).
     - `t`: trace: sample times (s, ≥ 0); impacts: contact onset times (s, on the
       recording's own clock, which may be offset from the release); apex: optional
@@ -142,7 +146,7 @@ class Dataset:
             try:
                 object.__setattr__(self, name, tuple(value))
             except TypeError:
-                raise InputError(f"Dataset: {name} = {value!r} is not a list of names") from None
+                raise InputError(f"Dataset: {name} = {shown(value)} is not a list of names") from None
         for name in ("t", "x", "h"):
             value = getattr(self, name)
             if value is not None:
@@ -157,7 +161,7 @@ class Dataset:
                 try:
                     object.__setattr__(self, name, float(value))
                 except (TypeError, ValueError):
-                    raise InputError(f"Dataset: {name} = {value!r} is not a number") from None
+                    raise InputError(f"Dataset: {name} = {shown(value)} is not a number") from None
         _validate(self, _Where("Dataset"))
 
     @property
@@ -190,7 +194,7 @@ class _Where:
 def plausibility_notes(ds: Dataset) -> list[str]:
     """Warnings for values that are legal but probably a unit slip (grams for kilograms,
     milliseconds for seconds, millimetres or centimetres for metres). Nothing is changed."""
-    where = ds.path or "data set"
+    where = printable(ds.path) if ds.path else "data set"
     notes = []
     if ds.mass > 0.5:
         notes.append(f"{where}: mass = {ds.mass:g} kg is heavy for a bouncing ball: grams written as kg?")
@@ -222,9 +226,11 @@ def _range_text(lo, lo_open):
 def _validate(ds: Dataset, where: _Where) -> None:
     """Check every field of `ds`; raise `ValueError` saying where, what and the valid range."""
     if ds.scene not in SCENES:
-        raise InputError(f"{where('scene')} = {ds.scene!r} is not supported; choose one of {SCENES}")
+        raise InputError(f"{where('scene')} = {shown(ds.scene)} is not supported; choose one of {SCENES}")
     if ds.observe not in OBSERVES:
-        raise InputError(f"{where('observe')} = {ds.observe!r} is not supported; choose one of {OBSERVES}")
+        raise InputError(
+            f"{where('observe')} = {shown(ds.observe)} is not supported; choose one of {OBSERVES}"
+        )
     for name, (unit, lo, lo_open) in _NUMERIC_KEYS.items():
         value = getattr(ds, name)
         if value is None:
@@ -232,7 +238,7 @@ def _validate(ds: Dataset, where: _Where) -> None:
                 raise InputError(f"{where(name)}: missing; it is required ({unit})")
             continue
         if not isinstance(value, float):
-            raise InputError(f"{where(name)} = {value!r} is not a number ({unit})")
+            raise InputError(f"{where(name)} = {shown(value)} is not a number ({unit})")
         if not math.isfinite(value):
             raise InputError(f"{where(name)} = {value} is not finite; it must be a finite number ({unit})")
         if lo is not None and (value < lo or (lo_open and value == lo)):
@@ -258,9 +264,10 @@ def _validate(ds: Dataset, where: _Where) -> None:
             f"{where('x0')} = {ds.x0:g} is out of range; valid range is [{-ds.gap / 2:g}, {ds.gap / 2:g}] m "
             f"(between the walls at ±gap/2, gap = {ds.gap:g} m)"
         )
+    _validate_noise(ds, where)
     _validate_provenance(ds, where)
     if ds.source is not None and (not isinstance(ds.source, str) or "\n" in ds.source or "\r" in ds.source):
-        raise InputError(f"{where('source')} = {ds.source!r} must be one line of text")
+        raise InputError(f"{where('source')} = {shown(ds.source)} must be one line of text")
     required, optional = COLUMNS[ds.observe]
     for name in ("t", "x", "h"):
         value = getattr(ds, name)
@@ -315,6 +322,24 @@ def _validate(ds: Dataset, where: _Where) -> None:
             )
 
 
+def noise_unit(observe: str) -> str:
+    """The unit of `noise` for an observation: s for impacts, m for trace and apex."""
+    return "s" if observe == "impacts" else "m"
+
+
+def _validate_noise(ds: Dataset, where: _Where) -> None:
+    """`noise` within its physical range (`NOISE_RANGE`, by the observation's unit)."""
+    if ds.noise is None:
+        return
+    unit = noise_unit(ds.observe)
+    lo, hi = NOISE_RANGE[unit]
+    if not lo <= ds.noise <= hi:
+        raise InputError(
+            f"{where('noise')} = {ds.noise:.6g} is out of range; valid range is [{lo:g}, {hi:g}] {unit} "
+            f"for observe = {ds.observe} (the measurement standard deviation)"
+        )
+
+
 def _validate_provenance(ds: Dataset, where: _Where) -> None:
     """`estimated` and `measured`: known names, none twice, none in both, scale and level
     for traces only."""
@@ -323,14 +348,14 @@ def _validate_provenance(ds: Dataset, where: _Where) -> None:
         for n in names:
             if n not in PROVENANCE_NAMES:
                 raise InputError(
-                    f"{where(key)} = {','.join(map(str, names))}: {n!r} is not one of "
+                    f"{where(key)} = {','.join(map(str, names))}: {shown(n)} is not one of "
                     f"{', '.join(PROVENANCE_NAMES)} (comma-separated, no spaces)"
                 )
             if names.count(n) > 1:
-                raise InputError(f"{where(key)}: {n!r} appears twice")
+                raise InputError(f"{where(key)}: {shown(n)} appears twice")
             if n in ("scale", "level") and ds.observe != "trace":
                 raise InputError(
-                    f"{where(key)}: {n!r} applies to traces only (observe = trace), not observe = {ds.observe}"
+                    f"{where(key)}: {shown(n)} applies to traces only (observe = trace), not observe = {ds.observe}"
                 )
     both = sorted(set(ds.estimated) & set(ds.measured))
     if both:
@@ -346,18 +371,19 @@ def read_bytes(path, what: str = "a data file") -> tuple[bytes, str]:
     try:
         name = os.fspath(path)
     except TypeError:
-        raise InputError(f"path = {path!r} is not a file path") from None
+        raise InputError(f"path = {shown(path)} is not a file path") from None
     if isinstance(name, bytes):
         name = os.fsdecode(name)
+    label = printable(name)
     if os.path.isdir(name):
-        raise InputError(f"{name}: is a directory, not {what}")
+        raise InputError(f"{label}: is a directory, not {what}")
     try:
         with open(name, "rb") as f:
             return f.read(), name
     except FileNotFoundError:
-        raise InputError(f"{name}: no such file") from None
+        raise InputError(f"{label}: no such file") from None
     except OSError as err:
-        raise InputError(f"{name}: cannot be read ({err.strerror or err})") from None
+        raise InputError(f"{label}: cannot be read ({err.strerror or err})") from None
 
 
 def _read_text(path) -> tuple[str, str]:
@@ -368,7 +394,7 @@ def _read_text(path) -> tuple[str, str]:
     except UnicodeDecodeError as err:
         line = raw.count(b"\n", 0, err.start) + 1
         raise InputError(
-            f"{name}: line {line}: the file is not UTF-8 text (byte 0x{raw[err.start]:02x} at offset "
+            f"{printable(name)}: line {line}: the file is not UTF-8 text (byte 0x{raw[err.start]:02x} at offset "
             f"{err.start}); save it as UTF-8"
         ) from None
     return text.removeprefix("\ufeff"), name
@@ -403,7 +429,7 @@ def _number(token: str, where: str, unit: str = "") -> float:
     suffix = f" ({unit})" if unit else ""
     if _NONFINITE.fullmatch(token):
         raise InputError(f"{where} = {token} is not finite; it must be a finite number{suffix}")
-    raise InputError(f"{where} = {token!r} is not a number{suffix}")
+    raise InputError(f"{where} = {shown(token)} is not a number{suffix}")
 
 
 def _split_value(key: str, rest: str, where: str) -> str:
@@ -415,13 +441,14 @@ def _split_value(key: str, rest: str, where: str) -> str:
     value, tail = m.group(0), rest[m.end() :]
     if tail and not (tail.startswith("(") or tail.lstrip(" ").startswith("(") or re.match(r" {2,}|\t", tail)):
         raise InputError(
-            f"{where} = {rest!r}: unexpected text {tail.strip()!r} after the value; the value is one "
+            f"{where} = {shown(rest)}: unexpected text {shown(tail.strip())} after the value; the value is one "
             "token in SI units, and an inline comment must start with '(' or follow two or more spaces"
         )
     return value
 
 
-def _parse(text: str, name: str) -> Dataset:
+def _parse(text: str, path: str) -> Dataset:
+    name = printable(path)  # for messages: a file name's control characters escaped
     lines = re.split(r"\r\n|\r|\n", text)  # only these end a line (as in editors)
     if lines[-1] == "":
         lines.pop()
@@ -436,7 +463,7 @@ def _parse(text: str, name: str) -> Dataset:
         )
     if version.group(1) != str(FORMAT_VERSION):
         raise InputError(
-            f"{name}: line 1: jaxunilat-data = {version.group(1)!r} is not supported; "
+            f"{name}: line 1: jaxunilat-data = {shown(version.group(1))} is not supported; "
             f"this version reads format {FORMAT_VERSION}"
         )
     meta: dict[str, str] = {}
@@ -453,7 +480,7 @@ def _parse(text: str, name: str) -> Dataset:
             raise InputError(f"{name}: line {number}: jaxunilat-data: duplicate key (first given on line 1)")
         if m is None or m.group(2) == ":" or not _KEY.fullmatch(m.group(1)):
             raise InputError(
-                f"{name}: line {number}: expected a metadata line '# key = value', got {lines[number - 1]!r} "
+                f"{name}: line {number}: expected a metadata line '# key = value', got {shown(lines[number - 1])} "
                 "(free comments start with '##')"
             )
         key = m.group(1)
@@ -482,7 +509,7 @@ def _parse(text: str, name: str) -> Dataset:
     for key in ("scene", "observe"):
         choices = SCENES if key == "scene" else OBSERVES
         if fields[key] not in choices:
-            raise InputError(f"{where(key)} = {fields[key]!r} is not supported; choose one of {choices}")
+            raise InputError(f"{where(key)} = {shown(fields[key])} is not supported; choose one of {choices}")
     for key, (unit, _, _) in _NUMERIC_KEYS.items():
         if key in meta:
             fields[key] = _number(meta[key], where(key), unit)
@@ -505,16 +532,18 @@ def _parse(text: str, name: str) -> Dataset:
         )
     for c in columns:
         if columns.count(c) > 1:
-            raise InputError(f"{name}: line {header_line}: column {c!r} appears twice; expected {expected}")
+            raise InputError(
+                f"{name}: line {header_line}: column {shown(c)} appears twice; expected {expected}"
+            )
         if c not in required + optional:
             raise InputError(
-                f"{name}: line {header_line}: column {c!r} is not allowed for observe = {fields['observe']}; "
+                f"{name}: line {header_line}: column {shown(c)} is not allowed for observe = {fields['observe']}; "
                 f"expected {expected}"
             )
     for c in required:
         if c not in columns:
             raise InputError(
-                f"{name}: line {header_line}: column {c!r} is missing for observe = {fields['observe']}; "
+                f"{name}: line {header_line}: column {shown(c)} is missing for observe = {fields['observe']}; "
                 f"expected {expected}"
             )
     values: list[list[float]] = [[] for _ in columns]
@@ -542,7 +571,7 @@ def _parse(text: str, name: str) -> Dataset:
         fields[c] = np.asarray(v, dtype=float)
     where = _Where(name, at, rows=rows, end=header_line)
     where.lines.setdefault("data", header_line)
-    fields["path"] = name
+    fields["path"] = path
     draft = Dataset.__new__(Dataset)  # validated with line numbers before the real construction
     for f in dataclasses.fields(Dataset):
         object.__setattr__(draft, f.name, fields.get(f.name))
@@ -614,20 +643,21 @@ def write_dataset(path, dataset: Dataset, *, overwrite: bool = False) -> None:
     - `overwrite`: replace an existing file (default: refuse with `ValueError`).
     """
     text = format_dataset(dataset)
-    _parse(text, os.fspath(path))  # the written text must read back
-    name = os.fspath(path)
-    if os.path.isdir(name):
+    path = os.fspath(path)
+    _parse(text, path)  # the written text must read back
+    name = printable(path)  # for messages
+    if os.path.isdir(path):
         raise InputError(f"{name}: is a directory; give a file name")
-    parent = os.path.dirname(os.path.abspath(name))
+    parent = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(parent):
         raise InputError(f"{name}: the directory {parent!r} does not exist")
-    streamed = special_kind(name) is not None  # a device or FIFO: written through, never replaced
-    if os.path.exists(name) and not overwrite and not streamed:
+    streamed = special_kind(path) is not None  # a device or FIFO: written through, never replaced
+    if os.path.exists(path) and not overwrite and not streamed:
         raise InputError(f"{name}: the file exists; pass overwrite=True to replace it")
-    if dataset.path is not None and os.path.exists(name) and os.path.exists(dataset.path):
-        if os.path.samefile(name, dataset.path):
+    if dataset.path is not None and os.path.exists(path) and os.path.exists(dataset.path):
+        if os.path.samefile(path, dataset.path):
             raise InputError(f"{name}: is the file this dataset was read from; refusing to overwrite it")
-    write_text(name, text, overwrite=overwrite)
+    write_text(path, text, overwrite=overwrite)
 
 
 def write_text(name: str, text: str, *, overwrite: bool) -> None:
@@ -637,4 +667,4 @@ def write_text(name: str, text: str, *, overwrite: bool) -> None:
         with write_atomically(name, replace=overwrite, encoding="utf-8", newline="\n") as f:
             f.write(text)
     except FileExistsError:
-        raise InputError(f"{name}: the file exists; pass overwrite=True to replace it") from None
+        raise InputError(f"{printable(name)}: the file exists; pass overwrite=True to replace it") from None

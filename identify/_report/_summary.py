@@ -234,10 +234,16 @@ def _e_by_bounce(e_bounces, derived, identifiable, opts, *, locked: bool):
         identifiable,
         [
             f"e's 95% interval is at least what its {e_bounces.size} bounces give (per-bounce e from successive apex "
-            f"heights: {', '.join(f'{v:.3f}' for v in e_bounces[:12])}{', ...' if e_bounces.size > 12 else ''}; "
+            f"heights: {', '.join(_fixed(v) for v in e_bounces[:12])}{', ...' if e_bounces.size > 12 else ''}; "
             "Student-t with bounces - 1 degrees of freedom)"
         ],
     )
+
+
+def _fixed(value: float) -> str:
+    """A per-bounce e with 3 decimals (`0.934`), in 4 significant digits where that would
+    run long (`1.234e+170` from a wild pair of heights, never 171 digits)."""
+    return f"{value:.3f}" if abs(value) < 1e6 else f"{value:.4g}"
 
 
 def _locked_note(p: float | None) -> list[str]:

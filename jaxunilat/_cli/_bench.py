@@ -30,9 +30,10 @@ def add_bench(commands) -> None:
 
 
 def _run_bench(args) -> int:
-    from ..internal._cli import input_errors
+    from ..internal._cli import input_errors, output_errors
     from ..internal._errors import EXIT_OK, RunError, UsageError
     from ..internal._io import check_output_dir
+    from ..internal._text import printable
 
     out = args.out
     with input_errors():
@@ -72,14 +73,16 @@ def _run_bench(args) -> int:
 
     result = run_bench(size, log=lambda line: print(line, flush=True))
     paths = {name: os.path.join(out, name) for name in OUTPUT_FILES}
-    try:
+    with output_errors("--out", paths["bench.json"]):
         with write_atomically(paths["bench.json"], encoding="utf-8") as fh:
             json.dump(result, fh, indent=1, allow_nan=False)
-        save_figure(work_precision_figure(result), paths["work_precision.png"])
-        save_figure(throughput_figure(result), paths["throughput.png"])
-    except OSError as err:
-        raise RunError(f"cannot write output: {err}") from None
+    for name, figure in (
+        ("work_precision.png", work_precision_figure),
+        ("throughput.png", throughput_figure),
+    ):
+        with output_errors("--out", paths[name]):
+            save_figure(figure(result), paths[name])
     print()
     print(goal_table(result))
-    print(f"\nwrote {', '.join(paths.values())} ({result['total_s']:.0f} s)")
+    print(f"\nwrote {', '.join(printable(p) for p in paths.values())} ({result['total_s']:.0f} s)")
     return EXIT_OK

@@ -40,6 +40,7 @@ from ..internal._executables import (
     private_directory,
     set_executable_cache,
 )
+from ..internal._text import printable
 
 #: Environment variables: the directory, and the opt-out.
 CACHE_DIR_ENV = "JAXUNILAT_CACHE_DIR"
@@ -75,10 +76,8 @@ def _refuse(path: str, why: str) -> None:
         fix = f"run 'chmod 700 {path}', set ${CACHE_DIR_ENV} to a directory of your own, or pass --no-cache"
     else:
         fix = f"set ${CACHE_DIR_ENV} to a writable directory of your own, or pass --no-cache"
-    print(
-        f"jaxunilat: warning: not using the cache directory {path}: {why}; running without the cache ({fix})",
-        file=sys.stderr,
-    )
+    line = f"not using the cache directory {path}: {why}; running without the cache ({fix})"
+    print(f"jaxunilat: warning: {printable(line)}", file=sys.stderr)
 
 
 def enable_compilation_cache(path: str | None = None) -> str | None:

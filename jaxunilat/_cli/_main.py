@@ -3,11 +3,14 @@
     jaxunilat [--no-cache] [--debug] COMMAND ...
 
 Exit codes: 0 success; 1 a run-time failure (the solver diverged or ran out of steps,
-a file could not be written) or an internal error (a bug); 2 bad usage or input; 3 a fit
-that did not converge or a recording refused as implausible (identify's commands);
-130 interrupted. Every error is one line on stderr, `jaxunilat: error: ...`, with no
-traceback and no usage dump; an internal error's line names the exception's type, and
-`--debug` prints its traceback.
+a file or the standard output could not be written) or an internal error (a bug); 2 bad
+usage or input; 3 a fit that did not converge or a recording refused as implausible
+(identify's commands); 130 interrupted; 141 (128 + SIGPIPE) the reader of the standard
+output went away (`jaxunilat ... | head`), without a message, as Unix tools end there.
+Every error is one line on stderr, `jaxunilat: error: ...`, with no traceback and no
+usage dump; control characters in it (a file name's newline or terminal escape) are
+shown escaped and numbers of more than 16 digits shortened (`internal._text`). An
+internal error's line names the exception's type, and `--debug` prints its traceback.
 
 Commands: jaxunilat's own are listed in `_COMMANDS`, each `(name, module)` whose module
 has `add_<name>(subparsers)`, imported only when the parser is built. Other packages
@@ -17,6 +20,7 @@ has `add_<name>(subparsers)`, imported only when the parser is built. Other pack
 
 from __future__ import annotations
 
+import errno
 import logging
 import os
 import re
@@ -24,6 +28,7 @@ import sys
 
 from ..internal._cli import COMMANDS_GROUP
 from ..internal._errors import (
+    EXIT_BROKEN_PIPE,
     EXIT_INTERNAL,
     EXIT_OK,
     EXIT_RUNTIME,
@@ -33,6 +38,7 @@ from ..internal._errors import (
     RunError,
     UsageError,
 )
+from ..internal._text import bounded_numbers, printable
 from ._args import Parser, cli_spelling, command_flags
 
 #: jaxunilat's own commands: (name, module holding `add_<name>(subparsers)`).
@@ -112,7 +118,9 @@ def build_parser() -> Parser:
 
 
 def _one_line(text: str) -> str:
-    return " ".join(str(text).split())
+    """`text` as one line: its line breaks and runs of white space as one space, other
+    control characters escaped, numbers of more than 16 digits shortened."""
+    return bounded_numbers(printable(" ".join(str(text).split())))
 
 
 def _fail(message: str, code: int) -> int:
@@ -120,7 +128,7 @@ def _fail(message: str, code: int) -> int:
     return code
 
 
-def _solver_line(err: RuntimeError) -> str | None:
+def _solver_line(err: BaseException) -> str | None:
     """The solver's own message (`jaxunilat.simulate: ...`) in a runtime error, wherever a
     wrapper put it (equinox prefixes its class name; JAX puts the traced stack first);
     None when it carries none."""
@@ -128,11 +136,98 @@ def _solver_line(err: RuntimeError) -> str | None:
     return ours[0] if ours else None
 
 
-def _is_runtime_failure(err: RuntimeError) -> bool:
-    """Whether `err` is a failure of a computation (equinox's or JAX's runtime error, or one
-    carrying the solver's message), not a bug."""
+def _is_runtime_failure(err: BaseException) -> bool:
+    """Whether `err` is a failure of a computation (equinox's or JAX's runtime error, one
+    carrying the solver's message, or the `ValueError` of JAX's fast path for a failed
+    host callback), not a bug."""
+    if isinstance(err, ValueError):
+        return "_EquinoxRuntimeError: " in str(err)
     kinds = {"EquinoxRuntimeError", "JaxRuntimeError", "XlaRuntimeError"}
     return _solver_line(err) is not None or any(c.__name__ in kinds for c in type(err).__mro__)
+
+
+def _runtime_line(err: BaseException) -> str:
+    """The one line of a runtime failure: the solver's message, else equinox's message
+    without its advice, else the error's first line."""
+    line = _solver_line(err)
+    if line is None:
+        found = re.search(r"EquinoxRuntimeError: ([^\n]+)", str(err))
+        line = found.group(1) if found else (str(err).splitlines() or [type(err).__name__])[0]
+    return line
+
+
+class _Stdout:
+    """The standard output while a command runs: the same stream, remembering the
+    `OSError` that a write or flush of it raised (a full disk, a closed pipe), also one
+    that the code printing swallowed (argparse's `--version` does), so that `main` tells
+    it from a failure to write a file."""
+
+    def __init__(self, stream):
+        self.stream = stream
+        self.failure: OSError | None = None
+
+    def _watch(self, method: str, *args):
+        try:
+            return getattr(self.stream, method)(*args)
+        except OSError as err:
+            self.failure = err
+            raise
+
+    def write(self, text):
+        return self._watch("write", text)
+
+    def writelines(self, lines):
+        return self._watch("writelines", lines)
+
+    def flush(self):
+        return self._watch("flush")
+
+    def __getattr__(self, name):
+        return getattr(self.stream, name)
+
+
+def _stdout_failure() -> OSError | None:
+    """The failure of the standard output so far, flushing it first; None if it took
+    everything (or is not watched)."""
+    out = sys.stdout
+    if not isinstance(out, _Stdout):
+        return None
+    try:
+        out.flush()
+    except OSError:
+        pass
+    except ValueError:  # closed
+        return out.failure
+    return out.failure
+
+
+def _stdout_failed(err: OSError) -> int:
+    """End a command whose output failed: a reader that went away (EPIPE: of the standard
+    output, also of `--out /dev/stdout` or a FIFO) ends it quietly with 128 + SIGPIPE, as
+    Unix tools end there; any other failure of the standard output (a full disk:
+    `> /dev/full`) is one line naming stdout, exit 1. When the process's own stdout failed,
+    what is left in its buffer is dropped (its descriptor is pointed at the null device),
+    so that Python's exit adds nothing."""
+    stream = getattr(sys.stdout, "stream", sys.stdout)
+    if stream is sys.__stdout__ and stream is not None and _stdout_failure() is not None:
+        try:
+            fd = stream.fileno()
+            null = os.open(os.devnull, os.O_WRONLY)
+        except (OSError, ValueError):  # no descriptor
+            pass
+        else:
+            os.dup2(null, fd)
+            os.close(null)
+    if isinstance(err, BrokenPipeError) or err.errno == errno.EPIPE:
+        return EXIT_BROKEN_PIPE
+    reason = f"[Errno {err.errno}] {err.strerror}" if err.errno else str(err)
+    return _fail(f"stdout: cannot write: {reason}", EXIT_RUNTIME)
+
+
+def _flushed(code: int) -> int:
+    """`code`, once the standard output took everything printed (else `_stdout_failed`)."""
+    failure = _stdout_failure()
+    return code if failure is None else _stdout_failed(failure)
 
 
 def _report(err: BaseException, parser, args, debug: bool) -> int:
@@ -146,9 +241,10 @@ def _report(err: BaseException, parser, args, debug: bool) -> int:
         return _fail(spelled(str(err)), EXIT_USAGE)
     if isinstance(err, RunError):
         return _fail(str(err), EXIT_RUNTIME)
-    if isinstance(err, RuntimeError) and _is_runtime_failure(err):
-        line = _solver_line(err) or (str(err).splitlines() or [type(err).__name__])[0]
-        return _fail(spelled(line), EXIT_RUNTIME)
+    if isinstance(err, BrokenPipeError) or (isinstance(err, OSError) and err is _stdout_failure()):
+        return _stdout_failed(err)
+    if isinstance(err, (RuntimeError, ValueError)) and _is_runtime_failure(err):
+        return _fail(spelled(_runtime_line(err)), EXIT_RUNTIME)
     if debug:
         import traceback
 
@@ -215,7 +311,7 @@ def main(argv: list[str] | None = None) -> int:
     exit code 130. Output files are written after the computation: an interrupted solve
     leaves none. Each file is moved into place whole (`internal.write_atomically`): an
     interrupt while one is being written leaves the earlier file of that name as it was,
-    at worst with a hidden `.NAME.*.tmp` beside it.
+    at worst with a hidden `.jxu-*.tmp` beside it.
     """
     from .._solver._loop_kernels import apply_on_import, user_flags
 
@@ -231,6 +327,7 @@ def main(argv: list[str] | None = None) -> int:
     callback_log.setLevel(logging.CRITICAL)
     words = sys.argv[1:] if argv is None else list(argv)
     parser = args = None
+    stdout = sys.stdout = _Stdout(sys.stdout)
     try:
         from ._environment import check_environment
 
@@ -244,14 +341,18 @@ def main(argv: list[str] | None = None) -> int:
             from ._compilation_cache import enable_compilation_cache
 
             enable_compilation_cache()
-        return int(args.func(args))
+        return _flushed(int(args.func(args)))
     except SystemExit as exc:  # --help, --version
-        return exc.code if isinstance(exc.code, int) else EXIT_OK if exc.code is None else EXIT_USAGE
+        return _flushed(
+            exc.code if isinstance(exc.code, int) else EXIT_OK if exc.code is None else EXIT_USAGE
+        )
     except KeyboardInterrupt:
         return _fail("interrupted", EXIT_INTERRUPTED)
     except Exception as err:
         debug = args.debug if args is not None else "--debug" in words
         return _report(err, parser, args, debug)
     finally:
+        if sys.stdout is stdout:
+            sys.stdout = stdout.stream
         callback_log.setLevel(callback_level)
         remove_watcher()

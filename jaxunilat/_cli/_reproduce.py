@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from ..internal._cli import input_errors, output_errors
 from ..internal._errors import EXIT_OK
+from ..internal._text import printable
 
 
 def add_reproduce(commands) -> None:
@@ -28,8 +29,8 @@ def _run_reproduce(args) -> int:
 
     with input_errors():
         check_output_dir("--out", args.out, (*FIGURES, SUMMARY), parent_must_exist=True)
-    with output_errors():
-        report = reproduce(args.out, quick=args.quick, log=print)
+    with output_errors():  # each line as the terminal gets it: a path's control characters escaped
+        report = reproduce(args.out, quick=args.quick, log=lambda line: print(printable(line)))
     failed = sum(not c.passed for c in report.claims)
     print(f"claims: {len(report.claims) - failed} PASS, {failed} FAIL (a FAIL is a finding, not an error)")
     return EXIT_OK

@@ -15,6 +15,7 @@ import numpy as np
 
 from ..internal._cli import input_errors, output_errors
 from ..internal._errors import EXIT_OK, InputError, RunError, UsageError
+from ..internal._text import printable
 from ._args import (
     add_solver_knobs,
     check_plot_format,
@@ -290,8 +291,9 @@ def _write_ball_outputs(args, ball, samples, table, summary) -> list[tuple[str, 
     ts, x, v = samples
     lines = []
     if args.out is not None:
-        write_csv(args.out, ("t", "x", "v"), (ts, x, v))
-        lines.append(("wrote", f"{args.out} (CSV t,x,v: {len(ts)} rows)"))
+        with output_errors("--out", args.out):
+            write_csv(args.out, ("t", "x", "v"), (ts, x, v))
+        lines.append(("wrote", f"{printable(args.out)} (CSV t,x,v: {len(ts)} rows)"))
     if args.plot is not None:
         from ..plot._ball import plot_ball, save_figure
 
@@ -300,14 +302,16 @@ def _write_ball_outputs(args, ball, samples, table, summary) -> list[tuple[str, 
             f"{summary['walls']}; {summary['heaviside']} Heaviside; {summary['solver']}"
         )
         fig = plot_ball(ts, x, v, walls=(float(ball.lower), float(ball.upper)), title=title)
-        save_figure(fig, args.plot)
-        lines.append(("wrote", f"{args.plot} (x(t), v(t), v(x))"))
+        with output_errors("--plot", args.plot):
+            save_figure(fig, args.plot)
+        lines.append(("wrote", f"{printable(args.plot)} (x(t), v(t), v(x))"))
     if args.events is not None:
         from .._solver._observe import CONTACT_COLUMNS
 
         columns = [table[name] for name in CONTACT_COLUMNS]
-        write_csv(args.events, CONTACT_COLUMNS, columns, nan="")
-        lines.append(("wrote", f"{args.events} (contact table: {len(table['t_in'])} contacts)"))
+        with output_errors("--events", args.events):
+            write_csv(args.events, CONTACT_COLUMNS, columns, nan="")
+        lines.append(("wrote", f"{printable(args.events)} (contact table: {len(table['t_in'])} contacts)"))
     return lines
 
 
@@ -375,7 +379,7 @@ def _build_coupling(example, params, reading, h):
         warnings.simplefilter("always")
         model = Coupling.table2(example, params, reading, h=h)
     for w in caught:
-        print(f"jaxunilat: warning: {w.message}", file=sys.stderr)
+        print(f"jaxunilat: warning: {printable(' '.join(str(w.message).split()))}", file=sys.stderr)
     return model
 
 
@@ -509,15 +513,17 @@ def _write_coupling_outputs(args, model, ts, ys) -> list[tuple[str, str]]:
     if args.out is not None:
         from ..internal._io import write_csv
 
-        write_csv(args.out, COUPLING_HEADER, [ts] + [ys[k] for k in COUPLING_HEADER[1:]])
-        lines.append(("wrote", f"{args.out} (CSV {','.join(COUPLING_HEADER)}: {len(ts)} rows)"))
+        with output_errors("--out", args.out):
+            write_csv(args.out, COUPLING_HEADER, [ts] + [ys[k] for k in COUPLING_HEADER[1:]])
+        lines.append(("wrote", f"{printable(args.out)} (CSV {','.join(COUPLING_HEADER)}: {len(ts)} rows)"))
     if args.plot is not None:
         from ..plot._ball import save_figure
         from ..plot._coupling import plot_coupling
 
         title = f"Coupling, Table 2 example {args.example}, {args.params}, reading {args.reading}"
-        save_figure(plot_coupling(ts, ys, delta=float(model.delta_xi), title=title), args.plot)
-        lines.append(("wrote", f"{args.plot} (Figs 11-14)"))
+        with output_errors("--plot", args.plot):
+            save_figure(plot_coupling(ts, ys, delta=float(model.delta_xi), title=title), args.plot)
+        lines.append(("wrote", f"{printable(args.plot)} (Figs 11-14)"))
     return lines
 
 

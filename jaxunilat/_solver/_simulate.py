@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import enum
 import functools
+import logging
 import math
 import re
 import sys
@@ -402,8 +403,7 @@ _solve = jax.jit(_solve_batched, static_argnames=("outputs", "throw", "vmap"))
 def _run(model, y0, t0, t1, ts, settings, outputs, throw):
     """Call `_solve` (through the command line's executable cache, `_executables`, when it
     is on); with `throw`, wait for the result and turn a solver failure into an
-    `equinox.EquinoxRuntimeError` that carries only our message (JAX's own error wraps
-    it in a host callback's traceback)."""
+    `equinox.EquinoxRuntimeError` that carries only our message (`_solver_error`)."""
     args = (model, y0, t0, t1, ts, settings)
     static = (outputs, throw, batching_mode())
     try:
@@ -411,12 +411,50 @@ def _run(model, y0, t0, t1, ts, settings, outputs, throw):
         sol = _solve(*args, *static) if throw else kept_call("simulate", _solve, args, static)
         if throw and not isinstance(sol.status, jax.core.Tracer):
             sol.status.block_until_ready()
-    except jax.errors.JaxRuntimeError as err:
-        found = re.search(r"_EquinoxRuntimeError: (.+)", str(err))
-        if found is None:
+    except (jax.errors.JaxRuntimeError, ValueError) as err:
+        clean = _solver_error(err)
+        if clean is None:
             raise
-        raise eqx.EquinoxRuntimeError(found.group(1).strip()) from None
+        raise clean from None
     return sol
+
+
+#: Where equinox's message ends in the text of the error JAX raises for a failed host
+#: callback: equinox appends advice about `equinox.filter_jit` after three line breaks.
+_EQX_ADVICE = re.compile(r"\n\s*\n\s*\n|\n-{5,}")
+
+
+def _solver_error(err: BaseException) -> eqx.EquinoxRuntimeError | None:
+    """The solver's message inside JAX's error for a failed run, as an
+    `equinox.EquinoxRuntimeError` of that message alone; None for any other error.
+
+    JAX raises the failure of `throw=True` (an `equinox.branched_error_if` host callback)
+    as a `JaxRuntimeError` on a function's first call and as a plain `ValueError`
+    (`INTERNAL: CpuCallback error ...`) from its C++ fast path on later calls; both
+    carry the callback's traceback and equinox's advice about `equinox.filter_jit`, which
+    is not ours to give (`simulate` is already compiled)."""
+    text = str(err)
+    marker = "_EquinoxRuntimeError: "
+    start = text.find(marker)
+    if start < 0:
+        return None
+    message = _EQX_ADVICE.split(text[start + len(marker) :], maxsplit=1)[0].strip()
+    return eqx.EquinoxRuntimeError(message or "jaxunilat.simulate: the run failed")
+
+
+class _OwnFailureLog(logging.Filter):
+    """Drop JAX's log record (`jax.pure_callback failed`, with the callback's traceback,
+    on stderr) for a failure of `simulate(throw=True)`: the same failure is raised as an
+    exception that carries its message, so the record only repeats it with a traceback
+    and equinox's advice. Other callbacks' records pass."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        info = record.exc_info
+        error = info[1] if isinstance(info, tuple) and len(info) > 1 else None
+        return not (type(error).__name__ == "_EquinoxRuntimeError" and str(error).startswith("jaxunilat."))
+
+
+logging.getLogger("jax._src.callback").addFilter(_OwnFailureLog())
 
 
 #: Default save times on the device, by (t0, t1, samples): building them with NumPy and
@@ -509,8 +547,12 @@ def simulate(
     - `outputs`: which outputs to save, from `model.output_names`
       (ball: x, v, force, penetration, energy, contact). Only these are stored.
     - `throw`: raise on failure (max_steps exhausted, non-finite values) with a
-      message that says what to change. With `throw=False` the result's
-      `status` says what happened instead.
+      message that says what to change: an `equinox.EquinoxRuntimeError` whose text
+      is that message alone, on the first call and on every later one. With
+      `throw=False` the result's `status` says what happened instead. Inside your own
+      `jax.jit` the failure surfaces where that function runs, as JAX's error around
+      the message; `equinox.filter_jit` reports it as an `EquinoxRuntimeError`, or
+      pass `throw=False` and read `Solution.message`.
 
     **Returns:** a `Solution`.
 

@@ -2,7 +2,8 @@
 
 Argument validation with messages that name the parameter, the value and the valid
 range; the output-path checks every command runs before any work, and the writer that
-never leaves a partial file; the command line's
+never leaves a partial file; how a message shows a user's paths and values (`_text.py`:
+control characters escaped, numbers in bounded width); the command line's
 error types and exit codes, and how a package registers a `jaxunilat` command
 (`_cli.py`: the `jaxunilat.commands` entry points). `identify` imports only
 jaxunilat's public API and this module (a test checks it), so the two packages depend
@@ -19,6 +20,7 @@ from ._cli import (
     output_errors as output_errors,
 )
 from ._errors import (
+    EXIT_BROKEN_PIPE as EXIT_BROKEN_PIPE,
     EXIT_INTERNAL as EXIT_INTERNAL,
     EXIT_NOT_CONVERGED as EXIT_NOT_CONVERGED,
     EXIT_OK as EXIT_OK,
@@ -36,6 +38,12 @@ from ._io import (
     check_output_paths as check_output_paths,
     special_kind as special_kind,
     write_atomically as write_atomically,
+)
+from ._text import (
+    bounded_numbers as bounded_numbers,
+    number as number,
+    printable as printable,
+    shown as shown,
 )
 from ._validate import (
     check_choice as check_choice,

@@ -30,6 +30,7 @@ import os
 from collections.abc import Iterator
 
 from ._errors import InputError, RunError
+from ._text import printable
 
 #: The entry-point group in which packages register `jaxunilat` commands.
 COMMANDS_GROUP = "jaxunilat.commands"
@@ -52,13 +53,23 @@ def input_errors() -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def output_errors() -> Iterator[None]:
-    """Report an `OSError` raised inside the block (writing the outputs) as a run-time
-    failure, `cannot write output: ...` (exit 1)."""
+def output_errors(flag: str | None = None, path: str | os.PathLike | None = None) -> Iterator[None]:
+    """Report an `OSError` raised inside the block (writing an output) as a run-time
+    failure (exit 1) that names the flag and the file the user gave:
+    `--plot out/x.png: cannot write: [Errno 13] Permission denied`; without `flag`,
+    `cannot write output: ...` with the file the error names. A `BrokenPipeError` (the
+    reader of a pipe or FIFO went away, as in `--out /dev/stdout | head`) passes
+    unchanged: the command line ends quietly there, as Unix tools do."""
     try:
         yield
+    except BrokenPipeError:
+        raise
     except OSError as err:
-        raise RunError(f"cannot write output: {err}") from None
+        if flag is None:
+            raise RunError(f"cannot write output: {err}") from None
+        reason = f"[Errno {err.errno}] {err.strerror}" if err.errno and err.strerror else str(err)
+        where = flag if path is None else f"{flag} {printable(path)}"
+        raise RunError(f"{where}: cannot write: {reason}") from None
 
 
 def check_plot_format(path: str | os.PathLike | None) -> None:

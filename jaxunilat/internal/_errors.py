@@ -18,6 +18,9 @@ PROG = "jaxunilat"
 EXIT_OK, EXIT_RUNTIME, EXIT_USAGE = 0, 1, 2
 #: Exit code of an internal error (a bug), as Python's own for an uncaught exception.
 EXIT_INTERNAL = 1
+#: Exit code of a command whose standard output's reader went away (`| head`): 128 +
+#: SIGPIPE, as a Unix tool that the signal ended; nothing is printed.
+EXIT_BROKEN_PIPE = 141
 #: Exit code of a fit that did not converge or an import refused as implausible (its
 #: report is still printed).
 EXIT_NOT_CONVERGED = 3

@@ -3,7 +3,7 @@
 Writers are generic (a header and equal-length columns) and refuse to write where
 they should not: into a directory, under a missing directory, or over an input file.
 Every file is written through `write_atomically`: an interrupted or failed write leaves
-the old file as it was, never a truncated one.
+the old file as it was, never a truncated one, and its error names the file the user gave.
 """
 
 from __future__ import annotations
@@ -91,8 +91,12 @@ def write_atomically(
 
     **Yields:** the open file object.
 
+    The temporary file is `.jxu-XXXXXXXX.tmp` (`TEMPORARY`), so that every name the
+    file system takes can be written.
+
     **Raises:** `ValueError` for a target that must not be written (naming the path
-    and what it is); `FileExistsError` as described under `replace`.
+    and what it is); `FileExistsError` as described under `replace`; an `OSError` of the
+    write (a full disk, no permission) names `path` as given, never the temporary file.
     """
     if mode not in ("w", "wb"):
         raise ValueError(f"mode = {mode!r} is out of range; valid values are 'w' and 'wb'")
@@ -102,23 +106,47 @@ def write_atomically(
     if kind is not None:
         if special == "refuse" or kind not in STREAMABLE:
             raise InputError(f"output path {os.fspath(path)!r} is a {kind}; give a regular file")
-        with _write_through(os.fspath(path), mode, **open_args) as f:
-            yield f
+        try:
+            with _write_through(os.fspath(path), mode, **open_args) as f:
+                yield f
+        except OSError as err:
+            raise _naming(err, None, os.fspath(path)) from None
         return
     target = os.path.realpath(os.fspath(path))
     if os.path.isdir(target):
         raise InputError(f"output path {os.fspath(path)!r} is a directory; give a file name")
     if not replace and os.path.lexists(target):
         raise FileExistsError(target)
-    folder, name = os.path.split(target)
-    tmp = os.path.join(folder, f".{name}.{secrets.token_hex(4)}.tmp")
+    tmp = temporary_name(target)
     try:
         with open(tmp, mode.replace("w", "x"), **open_args) as f:
             yield f
         _move(tmp, target, replace)
+    except OSError as err:
+        raise _naming(err, tmp, os.fspath(path)) from None
     finally:
         if os.path.lexists(tmp):
             os.remove(tmp)
+
+
+#: The temporary file's name beside the output: a fixed 17 characters, whatever the
+#: output's name (any name its file system takes, up to 255 bytes, can be written).
+TEMPORARY = ".jxu-{}.tmp"
+
+
+def temporary_name(target: str) -> str:
+    """A new temporary file name in `target`'s directory, `.jxu-XXXXXXXX.tmp`."""
+    return os.path.join(os.path.dirname(target), TEMPORARY.format(secrets.token_hex(4)))
+
+
+def _naming(err: OSError, tmp: str | None, path: str) -> OSError:
+    """`err` naming the output `path` the user gave where it named the temporary file
+    `tmp`, or named no file (a write that failed: a full disk); an error about another
+    file, one without an errno, and the `FileExistsError` of `replace=False` are left as
+    they are."""
+    if isinstance(err, FileExistsError) or err.errno is None or err.filename not in (None, tmp):
+        return err
+    return OSError(err.errno, err.strerror, path)  # the subclass of its errno
 
 
 @contextlib.contextmanager
@@ -184,6 +212,21 @@ def _move(tmp: str, target: str, replace: bool) -> None:
         os.replace(tmp, target)
 
 
+def _check_name_length(path: str, parent: str) -> None:
+    """Refuse a file name longer than its directory's file system takes (NAME_MAX, 255
+    bytes on most), before any work rather than after it."""
+    name = os.fsencode(os.path.basename(path))
+    try:
+        most = os.pathconf(parent, "PC_NAME_MAX")
+    except (OSError, ValueError, AttributeError):  # no such query here
+        return
+    if most and len(name) > most:
+        raise InputError(
+            f"output path {path!r}: the file name is {len(name)} bytes; valid range is 1 to {most} bytes "
+            "on this file system"
+        )
+
+
 def check_output_path(path: str | os.PathLike, *, inputs: Iterable[str | os.PathLike] = ()) -> None:
     """Raise `ValueError` unless `path` can be written as a new or replaced file.
 
@@ -202,6 +245,8 @@ def check_output_path(path: str | os.PathLike, *, inputs: Iterable[str | os.Path
     parent = os.path.dirname(os.path.abspath(path))
     if kind is None and not os.path.isdir(parent):
         raise InputError(f"output path {path!r}: the directory {parent!r} does not exist")
+    if kind is None:
+        _check_name_length(path, parent)
     for src in inputs:
         if src is not None and _same_file(path, os.fspath(src)):
             raise InputError(

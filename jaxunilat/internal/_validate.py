@@ -12,6 +12,7 @@ import jax
 import numpy as np
 
 from ._errors import InputError
+from ._text import shown
 
 
 def is_concrete(value) -> bool:
@@ -52,6 +53,13 @@ def real_number(name: str, value, *, unit: str = ""):
         raise InputTypeError(f"{name} = None; give {expected}")
     elif isinstance(value, (str, bytes)):
         raise InputTypeError(f"{name} = {_short(value)} is a string; give {expected}, not text")
+    elif isinstance(value, int) and not isinstance(value, bool):
+        if abs(value) >= 2**1024:  # beyond float64 (NumPy would make it an object array)
+            raise InputError(
+                f"{name} = {shown(value)} is out of range; valid range is finite float64 numbers "
+                "(magnitude below about 1.8e308)"
+            )
+        kind = "i"
     else:
         try:
             kind = np.asarray(value).dtype.kind
@@ -103,7 +111,13 @@ def float_field(name: str, unit: str = "", *, optional: bool = False):
 
 
 def _values(name, value):
-    return np.asarray(real_number(name, value), dtype=float).ravel()
+    try:
+        return np.asarray(real_number(name, value), dtype=float).ravel()
+    except OverflowError:  # an integer beyond float64
+        raise InputError(
+            f"{name} = {shown(value)} is out of range; valid range is finite float64 numbers "
+            "(magnitude below about 1.8e308)"
+        ) from None
 
 
 def check_finite(name: str, value, *, allow_none: bool = False) -> None:
@@ -200,11 +214,13 @@ def check_range(
 def check_type(name: str, value, cls: type, expected: str) -> None:
     """Raise `InputTypeError` naming `name` unless `value` is an instance of `cls`."""
     if not isinstance(value, cls):
-        raise InputTypeError(f"{name} = {value!r} ({type(value).__name__}) is not supported; give {expected}")
+        raise InputTypeError(
+            f"{name} = {shown(value)} ({type(value).__name__}) is not supported; give {expected}"
+        )
 
 
 def check_choice(name: str, value, choices) -> None:
     """Raise `InputError` (a `ValueError`) if `value` is not one of `choices`."""
     if value not in choices:
         opts = ", ".join(repr(c) for c in choices)
-        raise InputError(f"{name} = {value!r} is not supported; choose one of {opts}")
+        raise InputError(f"{name} = {shown(value)} is not supported; choose one of {opts}")
