@@ -56,7 +56,8 @@ from ._data._import_audio import (  # noqa: E402
     import_wav as import_wav,
     read_wav as read_wav,
 )
-from ._data._import_tables import import_phyphox as import_phyphox, import_video as import_video  # noqa: E402
+from ._data._import_phyphox import import_phyphox as import_phyphox  # noqa: E402
+from ._data._import_video import import_video as import_video  # noqa: E402
 from ._fit._problem import NUISANCE as NUISANCE, PARAMETERS as PARAMETERS  # noqa: E402
 from ._fit._restitution import (  # noqa: E402
     BounceRestitution as BounceRestitution,

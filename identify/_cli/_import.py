@@ -16,8 +16,13 @@ with `--diameter` (or `--drag`); `--mass`, `--diameter`, `--drag` override a pre
 
 Prints what was found (onsets kept, those left out with reasons, warnings, the
 timing-noise estimate) and writes a `jaxunilat-data` file (data/README.md), the onsets
-left out as `##` comment lines. The source is only read; an output path that names it
-(another spelling, a symlink) is refused before any work.
+left out as `##` comment lines. The source is only read, and only a regular file (a FIFO
+or a device is refused before it is opened); an output path that names it (another
+spelling, a symlink) is refused before any work.
+
+The subcommands are those of `identify._data._registry.IMPORTERS`: each importer module
+declares its name, help, flags and how it runs (`identify._data._import.Importer`); this
+module adds the options they all take and runs the import, the report and the figure.
 """
 
 from __future__ import annotations
@@ -25,24 +30,23 @@ from __future__ import annotations
 from jaxunilat.internal import EXIT_NOT_CONVERGED
 
 from .. import AIR_DENSITY, BALLS
-
-_X0_IMPACTS = (
-    "release height x0, m (default: estimated from the first interval T1 with the e of the interval ratios "
-    "(0.95 where they give none) and no drag, x0 = g T1^2 / (8 e^2); the file says so in a ## comment)"
-)
+from .._data._registry import IMPORTERS
 
 
-def _source_kind(sources, kind: str, *, source_help: str, x0_help: str, noise_help: str, **parser_kw):
-    """Add the `import KIND` subparser: SOURCE, the options every importer takes, `_run_import`."""
-    p = sources.add_parser(kind, **parser_kw)
-    p.add_argument("source", metavar="SOURCE", help=source_help)
+def _source_kind(sources, importer):
+    """Add the `import NAME` subparser of `importer`: SOURCE, the options every importer
+    takes, then its own flags; it runs `_run_import`."""
+    p = sources.add_parser(
+        importer.name, aliases=list(importer.aliases), help=importer.summary, description=importer.description
+    )
+    p.add_argument("source", metavar="SOURCE", help=importer.source_help)
     p.add_argument(
         "--out", metavar="DATA.csv", required=True, help="the data file to write (replaced if it exists)"
     )
     _ball_arguments(p)
-    p.add_argument("--x0", type=float, help=x0_help)
+    p.add_argument("--x0", type=float, help=importer.x0_help)
     p.add_argument("--v0", type=float, help="velocity at t = 0, m/s (default 0: released from rest)")
-    p.add_argument("--noise", type=float, metavar="S", help=noise_help)
+    p.add_argument("--noise", type=float, metavar="S", help=importer.noise_help)
     p.add_argument("--plot", metavar="PNG", help="draw what was imported (kept and rejected onsets)")
     p.add_argument(
         "--force",
@@ -53,7 +57,8 @@ def _source_kind(sources, kind: str, *, source_help: str, x0_help: str, noise_he
         "follow free flight, or a scale that disagrees with the ball's diameter; a tracking table: heights that "
         "point down, or free flight far from 9.81 m/s^2); by default such an import is refused with exit 3",
     )
-    p.set_defaults(func=_run_import)
+    importer.add_arguments(p)
+    p.set_defaults(func=_run_import, source_kind=importer.name, importer=importer)
     return p
 
 
@@ -90,165 +95,32 @@ def _ball_arguments(p) -> None:
     )
 
 
+def _bounds() -> str:
+    """What SOURCE may be, and up to what size it is read, one sentence."""
+    from .._data._audio_read import MAX_SAMPLES
+    from .._data._table_read import LIMITS
+
+    return (
+        f"SOURCE must be a regular file (a FIFO or a device is refused); {LIMITS}, a recording up to "
+        f"{MAX_SAMPLES:,} samples ({MAX_SAMPLES / 48000 / 60:.1f} min at 48 kHz)."
+    )
+
+
 def register(commands) -> None:
-    """Add `import` (with its sources `wav`, `phyphox`, `video`) to the `jaxunilat` subparsers
-    (the `jaxunilat.commands` entry point)."""
+    """Add `import` (with one source kind per importer of `IMPORTERS`: `wav`, `phyphox`,
+    `video`) to the `jaxunilat` subparsers (the `jaxunilat.commands` entry point)."""
     p = commands.add_parser(
         "import",
         help="turn a recording (audio, phyphox export, video, video-tracking CSV) into a data file",
         description="Turn a real-world recording into a jaxunilat data file (format: data/README.md): impact "
         "onsets from an audio recording or a phyphox export, or a height trace from a video-tracking table. "
         "Prints the onsets kept and those left out with reasons; the source file is only read. The ball must be "
-        "stated (--ball NAME, or --mass with --diameter or --drag): its mass and drag go into the data file.",
+        "stated (--ball NAME, or --mass with --diameter or --drag): its mass and drag go into the data file. "
+        + _bounds(),
     )
     sources = p.add_subparsers(dest="source_kind", metavar="SOURCE_KIND", required=True, parser_class=type(p))
-
-    w = _source_kind(
-        sources,
-        "wav",
-        aliases=["audio"],
-        source_help="the recording (only read): WAV, or m4a, mp3, ogg, opus, flac, 3gp with PyAV",
-        x0_help=_X0_IMPACTS,
-        noise_help="onset-time standard deviation, s (default: the timing-noise estimate)",
-        help="impact onsets from an audio recording of a bouncing ball (WAV, m4a, mp3, ...; alias: audio)",
-        description="Detect the impact clicks in a recording: a WAV file (PCM 8 to 64-bit, float 32/64-bit, "
-        "mu-law or A-law, any number of channels mixed to mono, 8-384 kHz), or m4a/AAC, mp3, ogg (Vorbis, "
-        'Opus), flac, 3gp decoded by PyAV (pip install "jaxunilat[video]"; or convert: ffmpeg -i IN -ac 1 '
-        "OUT.wav). A lossy codec at a low bit rate can move a click's onset early by its pre-echo: WAV or "
-        "FLAC keep every sample. One set of defaults for every recording: the noise floor is measured in the "
-        "recording's quiet parts; a candidate click must RISE FROM BELOW (its first millisecond RISE times "
-        "louder than the loudest of the 20 ms before, so the ringing after each click is a decaying "
-        "threshold) and peak above THRESHOLD noise sigma; its onset is refined to the click's start (where "
-        "its envelope first exceeds 10% of its own peak). The bounces are then the chain of candidates "
-        "whose intervals shrink as a bouncing ball's do (successive ratios near a slowly drifting "
-        "restitution; up to 2 missed quiet bounces in a row are inferred). Every other candidate is left "
-        "out with its reason: sound before the drop (handling, the release), echoes and ringing closer than "
-        "MIN_GAP to a bounce, spurious clicks where no bounce can be. Onsets that are not one bouncing "
-        "ball's are refused (exit 3) unless --force. Writes observe = impacts; noise defaults to the "
-        "timing-noise estimate (the scatter of the intervals about a smooth fit, /sqrt(2), at least one "
-        "sample period).",
-    )
-    w.set_defaults(source_kind="wav")  # `import audio` runs as `import wav`
-    w.add_argument(
-        "--threshold",
-        type=float,
-        default=None,
-        help="the least peak of a click, in noise sigma of the quiet parts (default 8)",
-    )
-    w.add_argument(
-        "--rise",
-        type=float,
-        default=None,
-        help="how many times louder than its recent past (the 20 ms before) a click must rise (default 2.5)",
-    )
-    w.add_argument(
-        "--dead-time",
-        type=float,
-        default=None,
-        help="s after a click's detection in which a new rise is the same click (default 0.02)",
-    )
-    w.add_argument(
-        "--min-gap",
-        type=float,
-        default=None,
-        help="s; the shortest interval between bounces: a click closer than this to a bounce is an echo or "
-        "double trigger (default 0.03)",
-    )
-
-    _source_kind(
-        sources,
-        "phyphox",
-        source_help="the export, .csv or .xlsx (only read)",
-        x0_help=_X0_IMPACTS,
-        noise_help="onset-time standard deviation, s (default: none, so a fit estimates it from its residuals)",
-        help="impact onsets from a phyphox Acoustic Stopwatch or (In)elastic collision export",
-        description="Read a phyphox export (CSV with comma, semicolon or tab separators and decimal point or "
-        "comma, detected; or .xlsx with openpyxl): the event-time column if present, else the cumulated "
-        "intervals. Rows with a zero or negative interval (duplicates) and junk rows after the data are left "
-        "out and reported; intervals that break the smooth decay (echoes, missed bounces) are kept and "
-        "reported as warnings, for a robust fit. Writes observe = impacts.",
-    )
-
-    v = _source_kind(
-        sources,
-        "video",
-        source_help="a video clip (mp4, mov, avi, mkv, webm; needs the video extra) or a tracking table, CSV "
-        "(only read)",
-        x0_help="tables: height at t = 0, m (default: the first sample's height); a clip finds its release",
-        noise_help="position standard deviation, m (default: none, so a fit estimates it from its residuals)",
-        help="a height trace from a phone video (tracked automatically) or a video-tracking table",
-        description="A video clip: the ball is tracked automatically (background subtraction, then the path "
-        "that follows free flight), repeated frames are left out, the length scale comes from gravity (and is "
-        "checked against the ball's diameter), the contact level from where successive flights meet, and held "
-        "frames before the release are left out; the data file names x0, v0, scale and level as estimated, so "
-        'a fit frees them. Needs PyAV: pip install "jaxunilat[video]". A tracking CSV: a header row with '
-        "units (t (s), y (cm)), possibly after a preamble line such as Tracker's 'mass A', or frame numbers "
-        "with --fps; repeated rows are left out, and a table whose free flight curves upwards (image "
-        "coordinates: --flip) or falls far from 9.81 m/s^2 (a unit or frame-rate slip, named) is refused (exit "
-        "3). Writes observe = trace with t (s, 0 = the first frame kept, not the release) and x (m).",
-    )
-    v.add_argument("--color", metavar="C", help="clips: the ball's colour, a hint (a name, #rrggbb or r,g,b)")
-    v.add_argument(
-        "--roi",
-        metavar="X0,Y0,X1,Y1",
-        type=_roi,
-        help="clips: search for the ball only in this rectangle, pixels of the picture as displayed (y down)",
-    )
-    v.add_argument(
-        "--column", metavar="NAME", help="the height column (default: y if present, else the second column)"
-    )
-    v.add_argument(
-        "--scale",
-        type=float,
-        metavar="F",
-        help="metres per unit of the height column (default: from the header unit m, cm or mm; required if "
-        "the header has none)",
-    )
-    _table_arguments(v)
-
-
-def _table_arguments(v) -> None:
-    """A tracking table's time axis, orientation, floor and what was measured."""
-    v.add_argument(
-        "--fps",
-        type=float,
-        metavar="F",
-        help="tables: the clip's frame rate, frames/s, for a frame-number column (frame, n, index; t = frame / "
-        "F); required with one",
-    )
-    v.add_argument(
-        "--flip",
-        action="store_true",
-        help="tables: the heights point down (image coordinates, y down): height = -y, shifted so that the "
-        "contact level is 0; without it such a table is refused (exit 3)",
-    )
-    v.add_argument(
-        "--floor",
-        type=float,
-        metavar="Y",
-        help="tables: the contact level in the table's own units (e.g. the floor's pixel row): height = y - Y "
-        "(Y - y with --flip); default: as given (--flip: where the flights meet); a fit frees it anyway",
-    )
-    v.add_argument(
-        "--measured",
-        metavar="NAMES",
-        help="tables: scale and/or level, comma-separated, if a ruler and a floor line were measured: written "
-        "as measured (a fit holds them) instead of estimated (a fit frees them)",
-    )
-
-
-def _roi(text: str) -> tuple[int, int, int, int]:
-    """`--roi X0,Y0,X1,Y1` as four integers (pixels)."""
-    import argparse
-
-    parts = text.split(",")
-    try:
-        values = tuple(int(p) for p in parts)
-    except ValueError:
-        values = ()
-    if len(values) != 4:
-        raise argparse.ArgumentTypeError(f"{text!r} is not four whole numbers X0,Y0,X1,Y1 (pixels)")
-    return values
+    for importer in IMPORTERS:
+        _source_kind(sources, importer)
 
 
 #: Exit status of an import refused as not one bouncing ball's (nothing is written).
@@ -261,28 +133,20 @@ def _ball_options(args) -> dict:
     return {name: getattr(args, name) for name in names}
 
 
-def _detector_options(args) -> dict:
-    """The WAV detector's settings given on the command line (none: its defaults)."""
-    names = ("threshold", "rise", "dead_time", "min_gap")
-    return {name: getattr(args, name) for name in names if getattr(args, name, None) is not None}
-
-
 def _plot_import(result, args) -> None:
-    """Draw what was imported into --plot (a WAV's detection, or a table's import)."""
+    """Draw what was imported into --plot, by what the import found: an audio detection's
+    envelope and onsets, a clip's trace and contact sheet, or a table's import."""
     from jaxunilat.plot import save_figure
 
+    from .. import OnsetDetection
     from ..plot import plot_detection, plot_table_import
 
-    if _is_clip(result):
+    if result.detection is not None and not isinstance(result.detection, OnsetDetection):
         _plot_clip(result.detection, args.plot)
         return
-    plot = plot_detection if args.source_kind == "wav" else plot_table_import
+    plot = plot_detection if result.detection is not None else plot_table_import
     save_figure(plot(result), args.plot)
     print(f"{'wrote':<10} {args.plot}")
-
-
-def _is_clip(result) -> bool:
-    return result.importer == "video" and result.detection is not None
 
 
 def sheet_path(plot: str) -> str:
@@ -329,24 +193,16 @@ def _refused(err, args) -> int:
 
 
 def _imported(args):
-    """The import of SOURCE, or the `ImplausibleRecording` that refused it; any other
-    complaint about the recording or the flags is bad input (exit 2)."""
+    """The import of SOURCE by its importer (`Importer.run`), or the `ImplausibleRecording`
+    that refused it; any other complaint about the recording or the flags is bad input
+    (exit 2)."""
     from jaxunilat.internal import input_errors
 
-    from .. import ImplausibleRecording, import_phyphox, import_video, import_wav
+    from .. import ImplausibleRecording
 
-    common = dict(**_ball_options(args), x0=args.x0, v0=args.v0, noise=args.noise)
     with input_errors():
         try:
-            if args.source_kind == "wav":
-                return import_wav(args.source, force=args.force, **_detector_options(args), **common)
-            if args.source_kind == "phyphox":
-                return import_phyphox(args.source, force=args.force, **common)
-            return import_video(
-                args.source, column=args.column, scale=args.scale, color=args.color, roi=args.roi,
-                fps=args.fps, flip=args.flip, floor=args.floor, measured=args.measured,
-                force=args.force, **common,
-            )  # fmt: skip
+            return args.importer.run(args)
         except ImplausibleRecording as err:
             return err
 
@@ -362,14 +218,15 @@ def _run_import(args) -> int:
     )
 
     from .. import ImplausibleRecording, ball_spec
-    from .._data._video_decode import is_video_file
+    from .._data._source import refuse_special
 
     with input_errors():
         try:  # the ball first: without it nothing can be written
             ball_spec(**_ball_options(args), cli=True)
         except ValueError as err:
             raise InputError(f"import {args.source_kind}: {err}") from None
-        clip = args.source_kind == "video" and is_video_file(args.source)
+        refuse_special(args.source)  # never opened: a FIFO would wait for a writer
+        clip = args.importer.contact_sheet(args.source)
         sheet = sheet_path(args.plot) if args.plot is not None and clip else None
         check_output_paths(
             ("--out", args.out), ("--plot", args.plot), ("--plot (its contact sheet)", sheet),

@@ -1,4 +1,4 @@
-"""The data layer: the `jaxunilat-data` format and the importers (WAV, phyphox, video).
+"""The data layer: the `jaxunilat-data` format and the importers (WAV, phyphox, video: `_registry`).
 
 Imports nothing else of identify: it parses and detects, and knows no model.
 """

@@ -1,32 +1,40 @@
 """A recording's samples: WAV through `scipy.io.wavfile`, every other format through PyAV.
 
-`read_audio(path)` gives (samples, rate, description); `load_audio(path)` the same as a
-`WavAudio` record (channels, bits, encoding, container). One reader for every import:
+`read_audio(path)` is the one reader of every import: a `WavAudio` record (samples,
+rate, channels, bits, encoding, container, `describe()`; it also unpacks as the triple
+(samples, rate, description)).
 
 - WAV (RIFF, RF64, RIFX) in PCM (8-bit unsigned, 16, 24, 32, 64-bit) or IEEE float (32,
   64-bit), plain or WAVE_FORMAT_EXTENSIBLE: `scipy.io.wavfile` (imported on use: importing
   identify loads no scipy), memory-mapped where it can be. No PyAV needed.
 - WAV in another encoding (μ-law and A-law, format tags 7 and 6; ADPCM, GSM, MP3 in WAV)
-  and every other container (m4a/AAC, mp3, ogg (Vorbis, Opus), flac, 3gp, the audio of a
-  phone video): decoded by PyAV (`pip install "jaxunilat[video]"`), whose bundled FFmpeg
-  drops a codec's priming samples where the container states them (an MP4 edit list, the
-  LAME header of an mp3, the Opus pre-skip), so the onsets keep the recording's clock.
-  Without PyAV these are refused in one line naming the pip command and the equivalent
+  and every other container (m4a/AAC, mp3, ogg (Vorbis, Opus), flac, 3gp, and the
+  soundtrack of a video clip: mp4, mov, mkv/webm, avi, its first audio stream): decoded
+  by PyAV (`pip install "jaxunilat[video]"`), whose bundled FFmpeg drops a codec's
+  priming samples where the container states them (an MP4 edit list, the LAME header of
+  an mp3, the Opus pre-skip), so the onsets keep the recording's clock. Without PyAV
+  these are refused in one line naming the pip command and the equivalent
   `ffmpeg -i IN -ac 1 OUT.wav`.
 
 Channels are mixed to mono by their mean (`mono=False` keeps them); 8–384 kHz. Only
-regular files are read: a FIFO or a device is refused before it is opened.
+regular files are read: a FIFO or a device is refused before it is opened
+(`_source.regular_source`).
 
 **Memory.** The samples are returned as float64: 8 bytes per frame (mono) or per sample
-(`mono=False`). A WAV is converted from its memory-mapped file in blocks of `BLOCK`
-frames, so reading peaks near that array plus the file itself: a 16-bit mono WAV needs
-about 5× its size (20 minutes at 48 kHz, 115 MB: 0.46 GB of samples, 0.55 GB in all).
-Where scipy cannot map the file (a 24-bit WAV; an unfinished recording whose data size
-overstates the file) its bytes, and for 24-bit an int32 copy of its samples, are held while
-it is read: about 4× a 24-bit mono file. A decoded format is written frame by frame into
-one array sized from the container's duration (grown by half where that is short): about
-the array itself, whatever the (much smaller) compressed file's size (20 minutes of 48 kHz
-AAC: 0.44 GB in all).
+(`mono=False`), and at most `MAX_SAMPLES` (2^27) of them are read: 1.07 GB, 46.6 minutes
+of 48 kHz mono. A longer recording is refused in one line before its samples are read
+(from the WAV header's data size, or the container's duration; a decoded stream that
+runs past the limit stops there). A WAV is converted from its memory-mapped file in
+blocks of `BLOCK` frames, so reading peaks near that array plus the file's pages: a
+16-bit mono WAV needs about 5× its size, an 8-bit one about 9× (20 minutes at 48 kHz,
+16-bit, 115 MB: 0.46 GB of samples, 0.55 GB in all). Where scipy cannot map the file (a
+24-bit WAV; an unfinished recording whose data size overstates the file) its bytes, and
+for 24-bit an int32 copy of its samples, are held while it is read: about 4× a 24-bit
+mono file. A decoded format is written frame by frame into one array sized from the
+container's duration (grown by half where that is short): about the array itself,
+whatever the (much smaller) compressed file's size (20 minutes of 48 kHz AAC: 0.44 GB in
+all). An import's onset detection adds its envelope and about 2 bytes a sample
+(`_import_audio.detect_onsets`): about 20 bytes a frame in all, 10× a 16-bit mono WAV.
 """
 
 from __future__ import annotations
@@ -39,16 +47,22 @@ import warnings
 
 import numpy as np
 
-from jaxunilat.internal import InputError, special_kind
+from jaxunilat.internal import InputError
+
+from ._source import regular_source
 
 #: The sample rates read, Hz.
 RATE_RANGE = (8000, 384000)
 #: Frames converted at a time (the memory a conversion adds beyond its output).
 BLOCK = 1 << 20
+#: The most samples read (frames, or frames × channels with `mono=False`): 2^27 float64
+#: values, 1.07 GB; 46.6 minutes of 48 kHz mono, 11.6 minutes at 192 kHz.
+MAX_SAMPLES = 1 << 27
 _PCM, _FLOAT, _EXTENSIBLE = 0x0001, 0x0003, 0xFFFE
 #: WAVE format tags decoded by PyAV (scipy reads PCM and float only).
 _WAVE_TAGS = {0x0002: "MS ADPCM", 0x0006: "A-law", 0x0007: "mu-law", 0x0011: "IMA ADPCM", 0x0031: "GSM"}
 _WAVE_TAGS |= {0x0055: "MP3"}
+_G711_TAGS = (0x0006, 0x0007)
 _LOSSLESS = ("flac", "alac", "pcm_", "wavpack", "tta", "ape")
 #: The sample-by-sample companding codecs (ITU-T G.711): lossy in level, exact in time.
 _G711 = ("mu-law", "A-law")
@@ -56,7 +70,7 @@ _G711 = ("mu-law", "A-law")
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class WavAudio:
-    """A recording's samples, mixed down to mono (or its channels, `load_audio(mono=False)`).
+    """A recording's samples, mixed down to mono (or its channels, `read_audio(mono=False)`).
 
     - `samples`: float64, full scale = 1 (PCM divided by 2^(bits−1), 8-bit PCM centred on
       128; float and decoded formats as they come); shape (frames,) or (frames, channels).
@@ -70,6 +84,8 @@ class WavAudio:
       μ-law and A-law, which keep every sample's time but not its level).
     - `bit_rate`: the stream's bit rate, bit/s (None where the container gives none).
     - `notes`: what the decoding changed (gaps in the time stamps filled with silence).
+
+    It unpacks as (samples, rate, description): `samples, rate, what = read_audio(path)`.
     """
 
     samples: np.ndarray
@@ -82,6 +98,10 @@ class WavAudio:
     lossy: bool = False
     bit_rate: float | None = None
     notes: tuple[str, ...] = ()
+
+    def __iter__(self):
+        """(samples, rate, `describe()`), for `samples, rate, what = read_audio(path)`."""
+        return iter((self.samples, self.rate, self.describe()))
 
     @property
     def framed(self) -> bool:
@@ -111,59 +131,53 @@ class WavAudio:
         return f"{self.container}, {self.rate:g} Hz, {kind}, {chans}, {self.duration:.3f} s{extra}"
 
 
-def read_audio(path, *, mono: bool = True) -> tuple[np.ndarray, float, str]:
-    """A recording's (samples, rate, description): float64 samples at full scale 1, mono
-    (the channels' mean) or, with `mono=False`, (frames, channels); the rate, Hz; one line
-    saying what was read (`WavAudio.describe`). Formats, memory: the module's docstring.
-    A file that cannot be read raises a one-line `InputError` naming it."""
-    audio = load_audio(path, mono=mono)
-    return audio.samples, audio.rate, audio.describe()
-
-
-def load_audio(path, *, mono: bool = True) -> WavAudio:
-    """`read_audio` as a `WavAudio` record (channels, bits, encoding, container, ...)."""
-    name = _regular_file(path)
+def read_audio(path, *, mono: bool = True) -> WavAudio:
+    """A recording's samples as a `WavAudio`: float64 at full scale 1, mono (the channels'
+    mean) or, with `mono=False`, (frames, channels); its rate, Hz; what was read (channels,
+    bits, encoding, container, `describe()`). Formats, memory and the `MAX_SAMPLES` limit:
+    the module's docstring; `path` may name a video clip (its soundtrack is read). A file
+    that cannot be read raises a one-line `InputError` naming it; the file is only read."""
+    name, _ = regular_source(path, "an audio file")
     try:
         with open(name, "rb") as f:
             head = f.read(12)
             wav = _wav_format(f, head, name) if _is_wave(head) else None
     except OSError as err:
         raise InputError(f"{name}: cannot be read ({err.strerror or err})") from None
+    if wav is not None and wav[0] in (_PCM, _FLOAT, *_G711_TAGS):  # the header's frames are exact
+        _check_length(name, wav[4], wav[1], wav[2], mono)
     if wav is not None and wav[0] in (_PCM, _FLOAT):
-        return _scipy_wav(name, wav, mono)
+        return _scipy_wav(name, wav[:4], mono)
     if wav is not None:
         return _decode(name, "WAV", mono, _WAVE_TAGS.get(wav[0], f"format tag 0x{wav[0]:04x}"))
     return _decode(name, _container_kind(head), mono)
 
 
-def _regular_file(path) -> str:
-    """The name of `path` for messages; one-line refusals of what is not a regular file."""
-    try:
-        name = os.fspath(path)
-    except TypeError:
-        raise InputError(f"path = {path!r} is not a file path") from None
-    name = os.fsdecode(name) if isinstance(name, bytes) else name
-    if os.path.isdir(name):
-        raise InputError(f"{name}: is a directory, not an audio file")
-    if not os.path.exists(name):
-        raise InputError(f"{name}: no such file")
-    kind = special_kind(name)
-    if kind is not None:  # never opened: a FIFO would wait for a writer, /dev/zero never end
-        raise InputError(
-            f"{name}: is a {kind}, not a regular file; save the recording to a file and import that"
-        )
-    return name
+def _check_length(name: str, frames: int, channels: int, rate: float, mono: bool) -> None:
+    """Refuse `frames` frames of `channels` at `rate` Hz beyond `MAX_SAMPLES` (one line)."""
+    values = frames * (1 if mono else max(channels, 1))
+    if values <= MAX_SAMPLES:
+        return
+    what = f" ({frames / rate / 60:.1f} min at {rate:g} Hz)" if rate > 0 else ""
+    stem = os.path.splitext(name)[0]
+    cut = f"ffmpeg -ss START -t 60 -i {shlex.quote(name)} -ac 1 {shlex.quote(stem + '-drop.wav')}"
+    raise InputError(
+        f"{name}: {frames:,} frames{what}, more than the {MAX_SAMPLES:,} samples a recording is read up to "
+        f"({MAX_SAMPLES * 8 / 1e9:.2f} GB as float64, {MAX_SAMPLES / 48000 / 60:.1f} min at 48 kHz mono); cut "
+        f"the drop out first: {cut}"
+    )
 
 
 def _is_wave(head: bytes) -> bool:
     return len(head) == 12 and head[:4] in (b"RIFF", b"RF64", b"RIFX") and head[8:12] == b"WAVE"
 
 
-def _wav_format(f, head: bytes, name: str) -> tuple[int, int, int, int]:
-    """(format tag, channels, rate, bits) of a WAVE file's `fmt ` chunk (for
-    WAVE_FORMAT_EXTENSIBLE, its sub-format's tag), `f` just after the 12-byte `head`: which
-    reader gets the file, and what its description says. Only chunk headers up to `data`
-    are read; the samples are scipy's or PyAV's."""
+def _wav_format(f, head: bytes, name: str) -> tuple[int, int, int, int, int]:
+    """(format tag, channels, rate, bits, frames) of a WAVE file's `fmt ` chunk (for
+    WAVE_FORMAT_EXTENSIBLE, its sub-format's tag) and its `data` chunk (the frames it holds,
+    at most what the file holds), `f` just after the 12-byte `head`: which reader gets the
+    file, what its description says, whether it is too long. Only chunk headers up to
+    `data` are read; the samples are scipy's or PyAV's."""
     order, fmt = (">" if head[:4] == b"RIFX" else "<"), None
     while True:
         chunk = f.read(8)
@@ -174,7 +188,9 @@ def _wav_format(f, head: bytes, name: str) -> tuple[int, int, int, int]:
         if cid == b"data":
             if fmt is None:
                 raise InputError(f"{name}: no 'fmt ' chunk before the data; the WAV file is damaged")
-            return fmt
+            size = min(size, os.fstat(f.fileno()).st_size - f.tell())  # RF64's 0xFFFFFFFF, a short file
+            block = fmt[1] * -(-fmt[3] // 8)
+            return (*fmt, size // block if block > 0 else 0)
         skip = size + (size & 1)
         if cid == b"fmt ":
             body = f.read(min(size, 26))
@@ -346,7 +362,9 @@ class _Decoded:
         seconds = float(stream.duration * stream.time_base) if stream.duration and stream.time_base else 0.0
         seconds = seconds or (container.duration or 0) / 1e6
         seconds = min(seconds, os.path.getsize(name) * 8 / _LEAST_BIT_RATE)  # a damaged header's duration
-        self.expected = int(seconds * 1.02 * rate) + rate
+        channels = 1 if mono else getattr(stream.codec_context, "channels", 0) or 1
+        _check_length(name, int(seconds * rate), channels, rate, mono)
+        self.expected = min(int(seconds * 1.02 * rate) + rate, MAX_SAMPLES // channels)
         for packet in container.demux(stream):
             try:
                 frames = packet.decode()
@@ -378,8 +396,13 @@ class _Decoded:
     def put(self, x: np.ndarray) -> None:
         x = x.mean(axis=1) if self.mono else x
         end = self.n + len(x)
+        if end * (1 if self.mono else self.channels) > MAX_SAMPLES:  # longer than its duration said
+            _check_length(self.name, end, self.channels, self.rate, self.mono)
         if self.buf is None or end > len(self.buf):
-            grown = np.empty((max(end, self.expected, int(1.5 * self.n) + BLOCK), *x.shape[1:]))
+            most = MAX_SAMPLES // (1 if self.mono else self.channels)
+            grown = np.empty(
+                (max(end, min(max(self.expected, int(1.5 * self.n) + BLOCK), most)), *x.shape[1:])
+            )
             if self.buf is not None:
                 grown[: self.n] = self.buf[: self.n]
             self.buf = grown

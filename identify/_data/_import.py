@@ -1,10 +1,11 @@
-"""What the importers share: the result object, the ball, the interval analysis.
+"""What the importers share: the result object, the ball, the interval analysis, `Importer`.
 
 An importer turns a recording (a WAV file, a phyphox export, a video-tracking table)
 into an `identify.Dataset` and says what it did: which onsets it kept, which it left
 out and why, what looked suspicious, and how noisy the timing is. Nothing is dropped
 silently: every onset left out is a `Rejected` entry, and `ImportResult.text()` writes
-them as `##` comment lines of the data file.
+them as `##` comment lines of the data file. Each importer module declares one
+`Importer` (its command line and how to run it); `_registry.IMPORTERS` lists them.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+from collections.abc import Callable
 
 import numpy as np
 
@@ -143,6 +145,56 @@ def _with_comments(text: str, comments: list[str]) -> str:
     lines = text.split("\n")
     header = next(i for i, line in enumerate(lines) if not line.startswith("#"))
     return "\n".join(lines[:header] + comments + lines[header:])
+
+
+def _no_frames(source: str) -> bool:
+    return False
+
+
+@dataclasses.dataclass(frozen=True)
+class Importer:
+    """One importer as the command line knows it: `jaxunilat import NAME SOURCE ...`.
+
+    Every importer takes SOURCE, `--out`, the ball (`--ball`, `--mass`, `--diameter`,
+    `--drag`, `--air-density`: one `BallSpec` through `check_options`), `--x0`, `--v0`,
+    `--noise`, `--plot` and `--force`; the command line adds those (with the three help
+    texts below), then the importer's own flags.
+
+    - `name`: the subcommand; `aliases`: other names for it (`import audio` is `import wav`).
+    - `summary`: one line in `jaxunilat import --help`; `description`: its own `--help`.
+    - `source_help`, `x0_help`, `noise_help`: the help of SOURCE, `--x0` and `--noise`.
+    - `add_arguments(parser)`: adds the importer's own flags to its `argparse` parser.
+    - `run(args)`: the import of `args.source` (an `ImportResult`); the flags are
+      `args`' attributes (`common_keywords(args)`: those every importer takes). It raises
+      `ImplausibleRecording` for what is not one ball's drop, `ValueError` for bad input.
+    - `contact_sheet(source)`: whether `--plot` of this SOURCE also draws a contact sheet
+      of its frames beside the figure (a video clip), so that path is checked too.
+    """
+
+    name: str
+    aliases: tuple[str, ...]
+    summary: str
+    description: str
+    source_help: str
+    x0_help: str
+    noise_help: str
+    add_arguments: Callable
+    run: Callable
+    contact_sheet: Callable = _no_frames
+
+
+#: The help of `--x0` of the impacts importers (`import wav`, `import phyphox`).
+X0_IMPACTS = (
+    "release height x0, m (default: estimated from the first interval T1 with the e of the interval ratios "
+    "(0.95 where they give none) and no drag, x0 = g T1^2 / (8 e^2); the file says so in a ## comment)"
+)
+#: The options every importer's `run` passes on to its import function.
+COMMON_OPTIONS = ("ball", "mass", "diameter", "drag", "air_density", "x0", "v0", "noise", "force")
+
+
+def common_keywords(args) -> dict:
+    """The options every importer takes (`COMMON_OPTIONS`), from parsed command-line `args`."""
+    return {name: getattr(args, name) for name in COMMON_OPTIONS}
 
 
 def check_options(*, ball, mass, diameter, drag, air_density, x0, v0, noise) -> BallSpec:
@@ -378,7 +430,9 @@ def _span_sum(m: int, e: float) -> float:
 
 
 def ratio_chain(times) -> RatioChain:
-    """Read the onsets `times` (s, increasing, at least 3) as one bouncing ball (see `RatioChain`)."""
+    """Read the onsets `times` (s, increasing, at least 3) as one bouncing ball (see `RatioChain`).
+
+    Linear in the number of onsets (`chain_spans`)."""
     interval = np.diff(np.asarray(times, dtype=float))
     ratio = interval[1:] / interval[:-1]
     decaying = ratio[(ratio > 0) & (ratio < 1)]
@@ -389,14 +443,86 @@ def ratio_chain(times) -> RatioChain:
     # Refine with single-flight ratios only: a missed bounce's pair of ratios is far from e.
     near = decaying[np.abs(np.log(decaying / e)) <= RATIO_TOLERANCE]
     e = float(np.median(near)) if len(near) else e
-    spans = np.ones(len(interval), dtype=int)
-    mismatch = np.zeros(len(ratio))
-    for k in range(len(ratio)):
-        unit = interval[k] / _span_sum(spans[k], e) * e ** spans[k]  # the next single flight
-        errors = [abs(math.log(interval[k + 1] / (unit * _span_sum(m, e)))) for m in range(1, MAX_SPAN + 1)]
-        best = int(np.argmin(errors))
-        spans[k + 1], mismatch[k] = best + 1, errors[best]
+    spans, mismatch = chain_spans(interval, e)
     return RatioChain(e, spans, mismatch, mismatch > RATIO_TOLERANCE)
+
+
+def chain_spans(interval: np.ndarray, e: float, *, start: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """The flights each interval spans (the first: `start`) and the mismatch of each
+    successive pair, for the intervals `interval` (s) of a chain with restitution `e`
+    (`RatioChain`): each next span is the one of 1…`MAX_SPAN` that predicts the next
+    interval best from the one before, a flight shrinking by e. Linear: the best next
+    span for each span before is tabled for every pair at once (`_least_log`), then
+    followed from the first interval."""
+    n = len(interval)
+    spans = np.ones(n, dtype=int)
+    mismatch = np.zeros(max(n - 1, 0))
+    if n:
+        spans[0] = start
+    if n < 2:
+        return spans, mismatch
+    sums = span_sums(e)
+    predicted = np.empty((MAX_SPAN, MAX_SPAN, n - 1))  # [next span, span before, pair]
+    for s in range(1, MAX_SPAN + 1):
+        unit = interval[:-1] / sums[s - 1] * e ** np.int64(s)  # the next single flight
+        for m in range(MAX_SPAN):
+            predicted[m, s - 1] = interval[1:] / (unit * sums[m])
+    choice = _least_log(predicted).tolist()
+    s = start - 1
+    path = [0] * (n - 1)
+    for k in range(n - 1):  # a state machine of MAX_SPAN states: integers only
+        s = choice[s][k]
+        path[k] = s
+    path_a = np.asarray(path)
+    spans[1:] = path_a + 1
+    previous = np.concatenate([[start - 1], path_a[:-1]])
+    mismatch[:] = _abs_log(predicted[path_a, previous, np.arange(n - 1)])
+    return spans, mismatch
+
+
+def span_sums(e: float) -> list[float]:
+    """S(m) = 1 + e + … + e^(m−1) for m = 1…`MAX_SPAN` (an interval spanning m flights
+    is the first flight times S(m))."""
+    return [_span_sum(m, e) for m in range(1, MAX_SPAN + 1)]
+
+
+def chain_steps(before, after, span, e: float, sums: list[float]) -> tuple[np.ndarray, np.ndarray]:
+    """One step of `chain_spans` for many pairs at once: the span (1…`MAX_SPAN`) of each
+    interval `after` (s) that follows `before` (s, spanning `span` flights; arrays of one
+    length) in a chain with restitution `e`, and its mismatch |log(observed / predicted)|;
+    `sums`: `span_sums(e)`. The same arithmetic as `chain_spans`."""
+    before, after, span = np.asarray(before, dtype=float), np.asarray(after, dtype=float), np.asarray(span)
+    power = np.array([0.0] + [e ** np.int64(m) for m in range(1, MAX_SPAN + 1)])
+    unit = before / np.asarray([0.0, *sums])[span] * power[span]  # the next single flight
+    predicted = np.stack([after / (unit * sums[m]) for m in range(MAX_SPAN)])
+    best = _least_log(predicted)
+    return best + 1, _abs_log(predicted[best, np.arange(len(before))])
+
+
+#: Two choices whose |log| np.log puts closer than this (relative) are decided by `math.log`.
+_LOG_TIE = 1e-9
+
+
+def _least_log(ratio: np.ndarray) -> np.ndarray:
+    """The index along axis 0 of the `ratio` (observed / predicted) whose |log| is least,
+    the first of equals, as `math.log` decides: `np.log` (vectorised, fast) decides where
+    the best is clear, `math.log` wherever two are within `_LOG_TIE` (the two logs may
+    differ in the last bit) or a log is not finite (`math.log` raises `ValueError` on 0
+    and negative values, as a chain of such intervals must)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        approx = np.abs(np.log(ratio))
+        ordered = np.sort(approx, axis=0)
+        close = ~(ordered[1] - ordered[0] > _LOG_TIE * ordered[1])
+    best = np.argmin(approx, axis=0)
+    for where in zip(*np.nonzero(close), strict=True):
+        exact = [abs(math.log(ratio[(m, *where)])) for m in range(len(ratio))]
+        best[where] = int(np.argmin(exact))
+    return best
+
+
+def _abs_log(x: np.ndarray) -> np.ndarray:
+    """|log x| element by element, by `math.log` (the mismatches keep its last bit)."""
+    return np.abs(np.fromiter(map(math.log, x), float, len(x)))
 
 
 def bounce_problems(times) -> list[str]:

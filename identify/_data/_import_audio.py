@@ -1,7 +1,9 @@
 """Impact onsets from an audio recording: the click detector and the WAV importer.
 
-`read_wav` reads the recording (`_audio_read.load_audio`: WAV by scipy, m4a/AAC, mp3,
-ogg, opus, flac, 3gp and the rest by PyAV), its channels mixed to mono.
+`import_wav` reads the recording with `_audio_read.read_audio` (WAV by scipy, m4a/AAC,
+mp3, ogg, opus, flac, 3gp and the rest by PyAV), its channels mixed to mono; `read_wav`
+is that same function under its public name. `WAV` is the importer's command line
+(`jaxunilat import wav`, alias `audio`).
 
 `detect_onsets` finds the impacts of one bouncing ball, with one set of defaults for every
 recording (real ones ring for 80-200 ms after each click, start with handling noise, lose
@@ -38,13 +40,16 @@ import numpy as np
 
 from jaxunilat.internal import InputError
 
-from ._audio_read import RATE_RANGE as RATE_RANGE, WavAudio as WavAudio, load_audio
+from ._audio_read import RATE_RANGE as RATE_RANGE, WavAudio as WavAudio, read_audio
 from ._import import (
     MAX_SPAN,
     RESTITUTION_RANGE,
+    X0_IMPACTS,
+    Importer,
     ImportResult,
     Rejected,
     check_options,
+    common_keywords,
     fit_intervals,
     gate,
     impacts_dataset,
@@ -52,18 +57,9 @@ from ._import import (
     ratio_chain,
 )
 
-
-def read_wav(path) -> WavAudio:
-    """Read a recording into a `WavAudio` (mono float64 samples, full scale 1).
-
-    Despite the name, every format of `_audio_read` (the module's docstring: memory, what
-    needs PyAV): WAV in PCM (8 to 64-bit), float (32, 64-bit), μ-law or A-law, plain or
-    WAVE_FORMAT_EXTENSIBLE, and m4a/AAC, mp3, ogg/Vorbis, opus, flac, 3gp; any number of
-    channels (averaged); 8–384 kHz. A WAV whose data size overstates the file (an
-    unfinished recording) is read up to the last whole frame. Anything else raises a
-    one-line `InputError` naming the file and the cause. The file is only read.
-    """
-    return load_audio(path)
+#: `identify.read_wav`: `read_audio` under the name it has always had (every format, not
+#: only WAV; a `WavAudio`, mono).
+read_wav = read_audio
 
 
 # -- detection ------------------------------------------------------------------------
@@ -405,9 +401,11 @@ def detect_onsets(
       or `threshold` if that is lower).
 
     **Memory:** the samples and their envelope as float64 (16 bytes a sample) and about 2
-    bytes a sample more (digital silence, the 0.25 ms grid); the steps that would copy the
-    recording again (the high-pass, the noise floor's medians, the running energy) go in
-    blocks of `_BLOCK` samples. 20 minutes at 48 kHz: about 1.1 GB.
+    bytes a sample more (digital silence, the 0.25 ms grid; digital silence's 3 bytes a
+    sample of temporaries come and go before the envelope is made); the steps that would
+    copy the recording again (the high-pass, the noise floor's medians, the running
+    energy) go in blocks of `_BLOCK` samples. 20 minutes at 48 kHz: about 1.1 GB. The
+    samples a recording holds are bounded by `_audio_read.MAX_SAMPLES`.
 
     **Returns:** an `OnsetDetection` (every candidate, kept or left out).
     """
@@ -428,8 +426,8 @@ def detect_onsets(
     x = np.asarray(samples, dtype=np.float64)
     if x.ndim != 1 or len(x) < 16:
         raise InputError(f"samples has shape {x.shape}; expected a 1-D array of at least 16 samples")
+    silent = digital_silence(x, rate)  # first: its temporaries come and go before the envelope's
     env = envelope(x, rate)
-    silent = digital_silence(x, rate)
     sigma = noise_floor(env, rate, silent)
     floor_notes = _floor_notes(silent, sigma, rate)
     if sigma <= 0.0:  # nothing but clicks and digital silence: no noise to measure
@@ -760,8 +758,8 @@ def import_wav(
 
     **Arguments:**
 
-    - `path`: the recording (only read): WAV, or m4a/AAC, mp3, ogg, opus, flac, 3gp with
-      PyAV (`read_wav`).
+    - `path`: the recording (only read, a regular file): WAV, or m4a/AAC, mp3, ogg, opus,
+      flac, 3gp with PyAV (`read_audio`: at most `MAX_SAMPLES`, 46.6 min at 48 kHz).
     - The ball, which must be stated (an `InputError` otherwise): `ball`, a preset's name
       (`identify.BALLS`: "pingpong", "tennis", ...), and/or `mass` (kg) with `diameter` (m)
       or `drag` (s/m). `mass` and `diameter` replace the preset's; the drag k = 1/terminal
@@ -781,7 +779,7 @@ def import_wav(
     spec = check_options(
         ball=ball, mass=mass, diameter=diameter, drag=drag, air_density=air_density, x0=x0, v0=v0, noise=noise
     )
-    audio = read_wav(path)
+    audio = read_audio(path)
     det = detect_onsets(
         audio.samples, audio.rate, threshold=threshold, dead_time=dead_time, min_gap=min_gap, rise=rise
     )
@@ -871,3 +869,70 @@ def second_sequence(det: OnsetDetection) -> list[str]:
         f"start at t = {', '.join(f'{t:.3f}' for t in starts)} s: cut the recording before each restart and "
         "import each drop alone), or clicks that are not one ball"
     ]
+
+
+# -- the command line --------------------------------------------------------------------
+
+
+def _add_arguments(w) -> None:
+    """The detector's flags of `import wav` (`detect_onsets`; none given: its defaults)."""
+    w.add_argument(
+        "--threshold",
+        type=float,
+        default=None,
+        help="the least peak of a click, in noise sigma of the quiet parts (default 8)",
+    )
+    w.add_argument(
+        "--rise",
+        type=float,
+        default=None,
+        help="how many times louder than its recent past (the 20 ms before) a click must rise (default 2.5)",
+    )
+    w.add_argument(
+        "--dead-time",
+        type=float,
+        default=None,
+        help="s after a click's detection in which a new rise is the same click (default 0.02)",
+    )
+    w.add_argument(
+        "--min-gap",
+        type=float,
+        default=None,
+        help="s; the shortest interval between bounces: a click closer than this to a bounce is an echo or "
+        "double trigger (default 0.03)",
+    )
+
+
+def _run(args) -> ImportResult:
+    names = ("threshold", "rise", "dead_time", "min_gap")
+    detector = {name: getattr(args, name) for name in names if getattr(args, name, None) is not None}
+    return import_wav(args.source, **detector, **common_keywords(args))
+
+
+#: `jaxunilat import wav` (alias `audio`).
+WAV = Importer(
+    name="wav",
+    aliases=("audio",),
+    summary="impact onsets from an audio recording of a bouncing ball (WAV, m4a, mp3, ...; alias: audio)",
+    description="Detect the impact clicks in a recording: a WAV file (PCM 8 to 64-bit, float 32/64-bit, "
+    "mu-law or A-law, any number of channels mixed to mono, 8-384 kHz), or m4a/AAC, mp3, ogg (Vorbis, "
+    'Opus), flac, 3gp decoded by PyAV (pip install "jaxunilat[video]"; or convert: ffmpeg -i IN -ac 1 '
+    "OUT.wav). A lossy codec at a low bit rate can move a click's onset early by its pre-echo: WAV or "
+    "FLAC keep every sample. One set of defaults for every recording: the noise floor is measured in the "
+    "recording's quiet parts; a candidate click must RISE FROM BELOW (its first millisecond RISE times "
+    "louder than the loudest of the 20 ms before, so the ringing after each click is a decaying "
+    "threshold) and peak above THRESHOLD noise sigma; its onset is refined to the click's start (where "
+    "its envelope first exceeds 10% of its own peak). The bounces are then the chain of candidates "
+    "whose intervals shrink as a bouncing ball's do (successive ratios near a slowly drifting "
+    "restitution; up to 2 missed quiet bounces in a row are inferred). Every other candidate is left "
+    "out with its reason: sound before the drop (handling, the release), echoes and ringing closer than "
+    "MIN_GAP to a bounce, spurious clicks where no bounce can be. Onsets that are not one bouncing "
+    "ball's are refused (exit 3) unless --force. Writes observe = impacts; noise defaults to the "
+    "timing-noise estimate (the scatter of the intervals about a smooth fit, /sqrt(2), at least one "
+    "sample period).",
+    source_help="the recording (only read): WAV, or m4a, mp3, ogg, opus, flac, 3gp with PyAV",
+    x0_help=X0_IMPACTS,
+    noise_help="onset-time standard deviation, s (default: the timing-noise estimate)",
+    add_arguments=_add_arguments,
+    run=_run,
+)
