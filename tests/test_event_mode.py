@@ -453,14 +453,18 @@ def test_save_time_count_matches_numpy_searchsorted(n):
         np.testing.assert_array_equal(np.asarray(got), expected)
 
 
-def test_save_time_rows_sequential_and_vectorized_agree():
-    """The two lowerings of the outputs' bookkeeping (a scan over the save times on a
-    CPU, vectorized elsewhere) give the same row, contact flag and step for every save
-    time, on random records; the row is the last recorded one whose first save time is
-    at or before it (its definition)."""
-    from jaxunilat._solver._event_output import _contact_steps_sequential, _contact_steps_vectorized
+@pytest.mark.parametrize("mode", ["rows", "batch"])
+def test_save_time_rows_and_contact_steps(mode, monkeypatch):
+    """The outputs' bookkeeping, for each batching rule (a loop over the rows one row at a
+    time, a scatter in lockstep; both under `jax.vmap` too): every save time gets the
+    last recorded row whose first save time is at or before it (its definition), the
+    row's contact flag, and there `step_to` of that row, zeros in flight; random records
+    with up to 300 times, times in contact filling one chunk and several."""
+    from jaxunilat._solver import _batching
+    from jaxunilat._solver._event_output import _contact_steps
     from jaxunilat._solver._event_state import StepRow
 
+    monkeypatch.setenv(_batching.ENV, mode)
     rng = np.random.default_rng(3)
     n_sw, n = 2, 2
     layout = StepRow(n_sw)
@@ -469,20 +473,38 @@ def test_save_time_rows_sequential_and_vectorized_agree():
     def step_to(s, row):
         return row[layout.y] * s + row[layout.T0]
 
+    def one(rec, k, ts):
+        return _contact_steps(rec, k, ts, layout, step_to, few=8)
+
     for n_ts in (1, 2, 7, 64, 65, 300):
         ts = np.sort(rng.uniform(0.0, 1.0, n_ts))
-        for _ in range(3):
+        cases = []
+        for p_contact in (0.05, 0.3, 0.9):
             k = int(rng.integers(1, n_ts + 1))  # recorded rows, each holding >= 1 save time
             firsts = np.concatenate([[0], np.sort(rng.choice(np.arange(1, n_ts), k - 1, replace=False))])
             rec = np.zeros((n_ts + 3, width))
             rec[:k, layout.T0] = rng.uniform(-1, 0, k)
             rec[:k, layout.FIRST] = firsts
-            rec[:k, layout.mask] = rng.uniform(size=(k, n_sw)) < 0.3
+            rec[:k, layout.mask] = rng.uniform(size=(k, n_sw)) < p_contact
             rec[:k, layout.y] = rng.normal(size=(k, n))
-            args = (jnp.asarray(rec), jnp.asarray(k), jnp.asarray(ts))
-            seq = _contact_steps_sequential(*args, layout=layout, step_to=step_to)
-            vec = _contact_steps_vectorized(*args, layout=layout, step_to=step_to)
-            expected = np.searchsorted(firsts, np.arange(n_ts), side="right") - 1
-            np.testing.assert_array_equal(np.asarray(seq[0]), expected)
-            for a, b in zip(seq, vec, strict=True):
-                np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+            row = np.searchsorted(firsts, np.arange(n_ts), side="right") - 1
+            contact = rec[row][:, layout.mask].any(axis=1)
+            y = np.where(
+                contact[:, None], rec[row][:, layout.y] * ts[:, None] + rec[row][:, [layout.T0]], 0.0
+            )
+            cases.append((rec, k, row, contact, y))
+        for rec, k, row, contact, y in cases:
+            got = jax.jit(one)(jnp.asarray(rec), jnp.asarray(k), jnp.asarray(ts))
+            _same_steps(got, (row, contact, y))
+        recs = jnp.asarray(np.stack([c[0] for c in cases]))
+        ks = jnp.asarray([c[1] for c in cases])
+        got = jax.jit(jax.vmap(one, in_axes=(0, 0, None)))(recs, ks, jnp.asarray(ts))
+        for j, (_, _, row, contact, y) in enumerate(cases):
+            _same_steps([a[j] for a in got], (row, contact, y))
+
+
+def _same_steps(got, expected):
+    """Rows and contact flags exactly; steps to rounding (XLA may fuse a·s + b)."""
+    np.testing.assert_array_equal(np.asarray(got[0]), expected[0])
+    np.testing.assert_array_equal(np.asarray(got[1]), expected[1])
+    np.testing.assert_allclose(np.asarray(got[2]), expected[2], rtol=1e-15, atol=1e-15)

@@ -13,6 +13,7 @@ The goals (targets in `GOALS`), by key:
 and, measured on code as users write it (`_user.py`):
 
 - `user_vmap_ratio`: plain `jax.jit(jax.vmap(f))` against rows one by one;
+- `vmap_outputs_ratio`: 2001 save times against 2 under lockstep `jax.vmap`;
 - `user_grad_ratio`: `jax.grad` against a forward solve;
 - `cli_second_run`: the command line's second run against its first;
 - `default_user_ratio`: a plain script that never calls `use_loop_kernels` against the
@@ -44,6 +45,11 @@ GOALS = {
     ),
     "cli_second_run": dict(
         target=0.5, unit="wall ratio second / first `jaxunilat simulate ball --solver event`, new cache"
+    ),
+    "vmap_outputs_ratio": dict(
+        target=1 / 0.7,
+        unit="time ratio 2001 / 2 save times, throughput scene under lockstep jax.vmap "
+        "(a throughput ratio >= 0.7)",
     ),
     "default_user_ratio": dict(
         target=1.2,
@@ -197,6 +203,15 @@ def user_goals(user: dict) -> dict:
         "reproduce": "export JAXUNILAT_CACHE_DIR=$(mktemp -d); time jaxunilat simulate ball --solver event; "
         "time jaxunilat simulate ball --solver event",
     }
+    if "vmap_outputs" in user:
+        vo = user["vmap_outputs"]
+        out["vmap_outputs_ratio"] = {
+            "value": vo["time_ratio"],
+            "measured": f"{vo['rule']}, N = {vo['n']}: {vo['throughput_traj_per_s'][0]:.0f} traj/s at "
+            f"{vo['samples'][0]} save times, {vo['throughput_traj_per_s'][1]:.0f} at {vo['samples'][1]} "
+            f"(throughput ratio {vo['ratio']:.2f}); {vo['scene']}",
+            "reproduce": "jaxunilat bench (user.vmap_outputs)",
+        }
     if "default_user" in user:
         out["default_user_ratio"] = _default_user_goal(user["default_user"])
     for key, section in (("user_grad_ratio", grad), ("default_user_ratio", user.get("default_user", {}))):

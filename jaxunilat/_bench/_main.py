@@ -952,6 +952,7 @@ def run_bench(size_name: str = "full", log: Callable[[str], None] = print) -> di
     result["user"] = {
         "code": user.USER_CODE,
         "vmap_against_rows": user.vmap_against_rows(size, _timed_together, log),
+        "vmap_outputs": user.vmap_outputs(size, _timed_together, log),
         "reverse_against_forward": user.reverse_against_forward(size, _timed_together, log),
         "command_line": user.command_line(size, log),
         "default_user": user.default_user(size, log),

@@ -10,6 +10,10 @@ rtol = atol = 1e-10, 201 save times over [0, 1] s, every other option at its def
   `simulate`'s batching rule runs the vmapped rows one by one too (`lax.map`, see
   `_batching`; `batching` in the result says which rule ran), so the ratio is about 1;
   with `JAXUNILAT_VMAP=batch` (the GPU rule) the rows run in lockstep, about 2x slower.
+- `vmap_outputs_ratio` (`vmap_outputs`): not the users' scene but the throughput scene
+  (Table 1 example 2, Dopri8 pieces at 1e-10, [0, 2] s) under `jax.jit(jax.vmap(f))` in
+  lockstep (`JAXUNILAT_VMAP=batch`, the GPU's rule, on any backend), N rows with 2001 save
+  times against 2: what the outputs cost under `vmap`; the throughputs' ratio.
 - `user_grad_ratio` (`reverse_against_forward`): `jax.jit(jax.grad(loss))` of a misfit (mean square of
   the trace against data plus mean square of the impact times against the data's) in
   (κ, k_r), against `jax.jit(loss)`, one forward solve of the same run; warm medians.
@@ -28,6 +32,7 @@ rtol = atol = 1e-10, 201 save times over [0, 1] s, every other option at its def
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -200,6 +205,96 @@ def vmap_against_rows(size, timed_together, log) -> dict:
         f"(compile {out['vmap_compile_s']:.1f} s / {out['sequential_compile_s']:.1f} s)"
     )
     return out
+
+
+# -- vmap_outputs_ratio ---------------------------------------------------------------------------------
+
+#: vmap_outputs_ratio's save-time counts: the throughput scene's (2001) against two.
+OUTPUT_SAMPLES = (2, 2001)
+
+
+def vmap_outputs(size, timed_together, log) -> dict:
+    """vmap_outputs_ratio: the throughput scene (Table 1 example 2, Dopri8 pieces at 1e-10,
+    [0, 2] s) under `jax.jit(jax.vmap(f))` in lockstep (`JAXUNILAT_VMAP=batch`, the GPU's
+    rule) with 2001 save times against 2: what the outputs cost under `vmap`, on this
+    backend. The goal is a ratio of throughputs ≥ 0.7."""
+    import jax
+
+    from .._solver._batching import ENV
+    from ._scale import pairs
+
+    n = size.user_n
+    kappa, k_r = (jax.device_put(v) for v in pairs(n))
+    calls = []
+    for samples in OUTPUT_SAMPLES:
+        fn = _lockstep(samples)
+        with _environment(ENV, "batch"):
+            jax.block_until_ready(fn(kappa, k_r))  # traced and compiled under the lockstep rule
+        calls.append(lambda fn=fn: jax.block_until_ready(fn(kappa, k_r)))
+    compile_s, timings = _timed(calls, size, timed_together)
+    few, many = timings
+    status = max(int(np.max(np.asarray(t.out[1]))) for t in timings)
+    out = {
+        "scene": "Table 1 example 2, event mode, dopri8 pieces, rtol = atol = 1e-10, [0, 2] s, x saved",
+        "n": n,
+        "rule": "jax.jit(jax.vmap(f)) with JAXUNILAT_VMAP=batch (lockstep)",
+        "samples": list(OUTPUT_SAMPLES),
+        "throughput_traj_per_s": [n / few.median, n / many.median],
+        "ratio": few.median / many.median,
+        "time_ratio": many.median / few.median,
+        "compile_s": compile_s,
+        "runs": many.runs,
+        "worst_status": status,
+    }
+    log(
+        f"  vmap_outputs_ratio N = {n}: {out['throughput_traj_per_s'][0]:.0f} traj/s at 2 save times, "
+        f"{out['throughput_traj_per_s'][1]:.0f} at 2001: ratio {out['ratio']:.2f} (lockstep vmap)"
+    )
+    return out
+
+
+@contextlib.contextmanager
+def _environment(name: str, value: str):
+    """The environment variable `name` set to `value` inside the block, restored after."""
+    previous = os.environ.get(name)
+    os.environ[name] = value
+    try:
+        yield
+    finally:
+        if previous is None:
+            os.environ.pop(name, None)
+        else:
+            os.environ[name] = previous
+
+
+def _lockstep(samples: int):
+    """`jax.jit(jax.vmap(row))` of the throughput scene's rows with `samples` save times
+    (traced at its first call: call it with `JAXUNILAT_VMAP=batch` set)."""
+    import jax
+    import jax.numpy as jnp
+
+    from .._models._ball import Ball
+    from .._solver._simulate import simulate
+    from ._scale import MAX_EVENTS, MAX_STEPS, PIECE, T1, TOL, Y0
+
+    def row(kappa, k_r):
+        sol = simulate(
+            Ball.table1(2, kappa=kappa, k_r=k_r),
+            jnp.asarray(Y0),
+            T1,
+            solver="event",
+            piece_solver=PIECE,
+            rtol=TOL,
+            atol=TOL,
+            samples=samples,
+            outputs=("x",),
+            max_steps=MAX_STEPS,
+            max_events=MAX_EVENTS,
+            throw=False,
+        )
+        return sol.ys["x"], sol.status
+
+    return jax.jit(jax.vmap(row))
 
 
 # -- user_grad_ratio -----------------------------------------------------------------------------------

@@ -120,8 +120,8 @@ def in_one_loop(fn: Callable, *leaves):
 
 #: Primitives that keep XLA:CPU from compiling a loop that holds them into one kernel
 #: and that a solve may hold: a host callback (`throw=True`'s error). (Scatters and sorts
-#: do too, but the solve's only ones are in `lax.platform_dependent` branches that a CPU
-#: program leaves out.)
+#: do too, but the solve's only scatter is in the outputs of lockstep batching, which never
+#: runs inside this one-row loop.)
 _NO_KERNEL = ("callback",)
 
 

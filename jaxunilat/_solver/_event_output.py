@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array
 
+from ._batching import batching_mode
 from ._event_pieces import erk_step
 from ._event_state import ENTRY, EXIT, EXTREMUM, EventRow, Piece, Problem, State, StepRow
 
@@ -164,39 +165,33 @@ def count_from(ts, start, t):
     lo = jnp.minimum(start, n - width)  # the times before lo are <= t too
     count = lo + jnp.sum(jax.lax.dynamic_slice_in_dim(ts, lo, width) <= t, dtype=start.dtype)
     return jax.lax.cond(
-        (count == lo + width) & (lo + width < n), lambda: _count_at_or_before(ts, t), lambda: count
+        (count == lo + width) & (lo + width < n),
+        lambda: _count_at_or_before(ts, t).astype(count.dtype),
+        lambda: count,
     )
 
 
 def _count_at_or_before(ts, t):
-    """How many of the sorted save times `ts` are ≤ t: a binary search, ⌈log2(len + 1)⌉
-    iterations."""
+    """How many of the sorted save times `ts` are ≤ t: a binary search unrolled into
+    ⌈log2(len + 1)⌉ vectorized steps (a `while` loop would run in lockstep under
+    `jax.vmap`, a select over its carry at every trip)."""
     ts, t = jax.lax.stop_gradient(ts), jax.lax.stop_gradient(t)
-
-    def body(state):
-        lo, hi = state
-        mid = (lo + hi) // 2
-        right = ts[jnp.minimum(mid, ts.shape[0] - 1)] <= t
-        return jnp.where(right, mid + 1, lo), jnp.where(right, hi, mid)
-
-    start = (jnp.array(0), jnp.array(ts.shape[0]))
-    return jax.lax.while_loop(lambda state: state[0] < state[1], body, start)[0]
+    return jnp.searchsorted(ts, t, side="right", method="scan_unrolled")
 
 
 def _rows_of_times(rec, n_rec, n_ts, layout: StepRow):
-    """The recorded row that holds each save time. Rows hold consecutive runs of save
-    times (column `FIRST`: the index of a row's first one), so marking where each run
-    starts and counting the marks gives every time its row. On a CPU the marks are set
-    by a loop over the rows (a scatter would keep the solve's loop from being one
-    kernel); elsewhere by a scatter."""
+    """The recorded row that holds each save time: the last row whose first save time
+    (column `FIRST`) is at or before it. Rows hold consecutive runs of save times, so
+    marking where each run starts and counting the marks gives every time its row.
+
+    Solves that run one row at a time (`batching_mode() == "rows"`, a CPU) set the marks
+    by a loop over the rows: a scatter would keep the solve's loop from being one kernel.
+    Solves batched in lockstep set them by one scatter: under `jax.vmap` that loop's trip
+    count differs between rows and runs behind a select over all marks at every trip.
+    """
     firsts = _row_facts(rec, layout)[0]
-    marks = jax.lax.platform_dependent(
-        firsts,
-        n_rec,
-        cpu=functools.partial(_row_starts_loop, n_ts=n_ts),
-        default=functools.partial(_row_starts_scatter, n_ts=n_ts),
-    )
-    return _running_sum(marks)
+    starts = _row_starts_loop if batching_mode() == "rows" else _row_starts_scatter
+    return _running_sum(starts(firsts, n_rec, n_ts=n_ts))
 
 
 def _row_starts_loop(firsts, n_rec, *, n_ts):
@@ -215,90 +210,57 @@ def _row_starts_scatter(firsts, n_rec, *, n_ts):
     return jnp.zeros(n_ts, jnp.int32).at[jnp.where(later, firsts[1:], n_ts)].add(1, mode="drop")
 
 
-def _contact_steps(rec, n_rec, ts, layout: StepRow, step_to):
-    """For each save time: its recorded row, whether that row is a contact, and there the
-    pair's step from the row's start (`step_to(s, row)`; zeros at times in flight).
-
-    On a CPU loops that step only where a contact is (`_contact_steps_sequential`), all
-    in one loop kernel with `use_loop_kernels`; on other platforms vectorized
-    (`_contact_steps_vectorized`). Both give the same numbers.
-    """
-    return jax.lax.platform_dependent(
-        rec,
-        n_rec,
-        ts,
-        cpu=functools.partial(_contact_steps_sequential, layout=layout, step_to=step_to),
-        default=functools.partial(_contact_steps_vectorized, layout=layout, step_to=step_to),
-    )
-
-
 def _row_facts(rec, layout: StepRow):
     """(index of each row's first save time, whether each row is a contact)."""
     rec = jax.lax.stop_gradient(rec)
     return rec[:, layout.FIRST].astype(jnp.int32), jnp.any(rec[:, layout.mask] != 0, axis=1)
 
 
-#: Save times per chunk in `_contact_steps_sequential`: a chunk with no time in contact
-#: costs one branch instead of a loop iteration per time.
-_CHUNK = 32
+#: Save times in contact stepped at once in `_contact_steps`.
+_FEW = 32
 
 
-def _contact_steps_sequential(rec, n_rec, ts, *, layout: StepRow, step_to):
-    """`_contact_steps` as loops that compile into the solve's kernel: each time's row
-    (`_rows_of_times`), then a scan over chunks of `_CHUNK` times that steps only in
-    the chunks that hold a time in contact, one time after the other (a contact lasts a
-    few save times, so most chunks cost one branch)."""
+def _contact_steps(rec, n_rec, ts, layout: StepRow, step_to, few: int = _FEW):
+    """For each save time: its recorded row, whether that row is a contact, and there the
+    pair's step from the row's start (`step_to(s, row)`; zeros at times in flight).
+
+    A contact spans a few save times, so the pair steps only there: a loop over chunks
+    of `few` times in contact, the k-th of them found by a binary search of the running
+    count of times in contact, until every one is stepped. Under `jax.vmap` the loop runs
+    as many chunks as the row with most times in contact needs (usually one or two), not
+    a step per save time; without a scatter it stays inside the solve's loop kernel on a
+    CPU.
+    """
     n_ts, n = ts.shape[0], rec.shape[1] - layout.width(0)
     index = _rows_of_times(rec, n_rec, n_ts, layout)
     contact = _row_facts(rec, layout)[1][index]
-    size = min(n_ts, _CHUNK)
-    chunks = -(-n_ts // size)
-    pad = chunks * size - n_ts
-
-    def padded(values, fill):
-        values = jnp.concatenate([values, jnp.full(pad, fill, values.dtype)]) if pad else values
-        return values.reshape(chunks, size)
-
-    def one(_, time):
-        s, i, inside = time
-        row = jax.lax.dynamic_index_in_dim(rec, i, keepdims=False)
-        return None, jax.lax.cond(inside, lambda: step_to(s, row), lambda: jnp.zeros(n, rec.dtype))
-
-    def chunk(_, times):
-        return None, jax.lax.cond(
-            jnp.any(times[2]),
-            lambda: jax.lax.scan(one, None, times)[1],
-            lambda: jnp.zeros((size, n), rec.dtype),
-        )
-
-    times = (padded(ts, ts[-1]), padded(index, 0), padded(contact, False))
-    y = jax.lax.scan(chunk, None, times)[1].reshape(-1, n)[:n_ts]
-    return index, contact, y
-
-
-def _contact_steps_vectorized(rec, n_rec, ts, *, layout: StepRow, step_to, few=64):
-    """`_contact_steps` without a loop over the save times: the rows by
-    `_rows_of_times`, and the times in contact gathered into chunks of `few`, a chunk
-    with none skipped."""
-    n_ts, n = ts.shape[0], rec.shape[1] - layout.width(0)
-    index = _rows_of_times(rec, n_rec, n_ts, layout)
-    contact = _row_facts(rec, layout)[1][index]
+    count = _running_sum(contact.astype(jnp.int32))
+    total = count[-1]
     size = min(n_ts, few)
     chunks = -(-n_ts // size)
-    count = jnp.cumsum(contact)
-    # The times in contact in order (padding: n_ts, out of range), in chunks.
-    order = jnp.full(chunks * size, n_ts)
-    order = order.at[jnp.where(contact, count - 1, n_ts)].set(jnp.arange(n_ts), mode="drop")
 
-    def chunk(_, idx):
-        def work():
-            i = jnp.minimum(idx, n_ts - 1)
-            return jax.vmap(step_to)(ts[i], rec[index[i]])
+    def body(carry):
+        k, out = carry
+        # The (k·size + j + 1)-th time in contact: the first index where the count reaches it.
+        wanted = k * size + jnp.arange(1, size + 1, dtype=count.dtype)
+        i = jnp.minimum(jnp.searchsorted(count, wanted, side="left", method="scan_unrolled"), n_ts - 1)
+        y = jax.vmap(step_to)(ts[i], rec[index[i]])
+        return k + 1, eqxi.buffer_at_set(out, k, y.astype(rec.dtype))
 
-        return None, jax.lax.cond(idx[0] < n_ts, work, lambda: jnp.zeros((size, n), rec.dtype))
-
-    y = jax.lax.scan(chunk, None, order.reshape(chunks, size))[1].reshape(-1, n)
-    return index, contact, jnp.where(contact[:, None], y[jnp.clip(count - 1, 0, chunks * size - 1)], 0.0)
+    # A bounded loop (nested scans whose branches skip the chunks past the last time in
+    # contact, for every row at once under `jax.vmap`): reverse and forward mode both
+    # differentiate it; the stepped times are a buffer, not a checkpoint.
+    init = (jnp.zeros((), count.dtype), jnp.zeros((chunks, size, n), rec.dtype))
+    y = eqxi.while_loop(
+        lambda carry: carry[0] * size < total,
+        body,
+        init,
+        max_steps=chunks,
+        buffers=lambda carry: carry[1],
+        kind="bounded",
+    )[1].reshape(chunks * size, n)
+    y = y[jnp.clip(count - 1, 0, chunks * size - 1)]
+    return index, contact, jnp.where(contact[:, None], y, 0.0)
 
 
 def _running_sum(values):
