@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from jaxunilat.internal import check_choice
+from jaxunilat.internal import check_choice, keep_placement, latency_bound
 
 from ._fit import _plausible as plausible, _stages as stages
 from ._fit._alone import alone_restitution, alone_starts
@@ -59,6 +59,7 @@ from ._report._summary import CONTACT, summarize_fit
 __all__ = ["METHODS", "default_optimizer", "fit"]
 
 
+@latency_bound
 def fit(
     data,
     *,
@@ -221,7 +222,7 @@ def _fit_laws(datasets, laws: tuple[str, ...], opts: Options, initial: dict) -> 
     with concurrent.futures.ThreadPoolExecutor(
         max_workers=len(laws), thread_name_prefix="identify-law"
     ) as pool:
-        futures = {name: pool.submit(one, name, opts.progress and k == 0) for k, name in enumerate(laws)}
+        futures = {name: pool.submit(keep_placement(one), name, opts.progress and k == 0) for k, name in enumerate(laws)}
         return {name: future.result() for name, future in futures.items()}
 
 
@@ -412,7 +413,7 @@ def _warm_evaluator(setup, pool) -> concurrent.futures.Future | None:
     e = setup.e0 if setup.e0 is not None else 0.8
     mass = float(setup.datasets[0].mass)
     kappa, k_r = hunt_crossley_from_restitution(e, CONTACT_TIME_GUESS, mass, setup.speed, refine=0)
-    return pool.submit(setup.evaluator.warm, point_at(setup, kappa, k_r))
+    return pool.submit(keep_placement(setup.evaluator.warm), point_at(setup, kappa, k_r))
 
 
 def _restore_clocks(result, originals, clocks) -> None:

@@ -33,7 +33,7 @@ import os
 
 import numpy as np
 
-from jaxunilat.internal import InputError, check_range, shown
+from jaxunilat.internal import InputError, check_range, latency_bound, shown
 
 from ._fit_json import as_float, check_fit_value, read_json
 
@@ -449,6 +449,7 @@ def load_fit(path) -> dict:
     return fit
 
 
+@latency_bound
 def qualify_fit(
     fit,
     *,

@@ -20,6 +20,7 @@ has `add_<name>(subparsers)`, imported only when the parser is built. Other pack
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import logging
 import os
@@ -38,6 +39,7 @@ from ..internal._errors import (
     RunError,
     UsageError,
 )
+from ..internal._placement import on_host
 from ..internal._text import bounded_numbers, printable
 from ._args import Parser, cli_spelling, command_flags
 
@@ -341,7 +343,11 @@ def main(argv: list[str] | None = None) -> int:
             from ._compilation_cache import enable_compilation_cache
 
             enable_compilation_cache()
-        return _flushed(int(args.func(args)))
+        # Latency-bound commands run on the host CPU where the default backend is an
+        # accelerator (`internal.on_host`); the bench measures what Python users get.
+        placement = contextlib.nullcontext() if args.command == "bench" else on_host()
+        with placement:
+            return _flushed(int(args.func(args)))
     except SystemExit as exc:  # --help, --version
         return _flushed(
             exc.code if isinstance(exc.code, int) else EXIT_OK if exc.code is None else EXIT_USAGE

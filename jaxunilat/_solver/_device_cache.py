@@ -27,7 +27,9 @@ class DeviceCache:
         self._size = size
 
     def get(self, key: Hashable, build: Callable[[], Any]) -> Any:
-        """The value for `key`, from `build()` the first time."""
+        """The value for `key`, from `build()` the first time (per default device: a value
+        kept for the host is not handed to a call placed on an accelerator)."""
+        key = (key, jax.config.jax_default_device)
         value = self._values.get(key)
         if value is not None:
             self._values.move_to_end(key)

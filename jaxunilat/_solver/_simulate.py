@@ -26,6 +26,7 @@ from .._models._heaviside import Exact
 from .._models._model import AbstractCanRest, AbstractContactModel, AbstractModel, AbstractSwitchedModel
 from ..internal._errors import InputError
 from ..internal._executables import kept_call
+from ..internal._placement import on_host
 from ..internal._validate import (
     InputTypeError,
     as_float_array,
@@ -581,6 +582,53 @@ def simulate(
             "lost; call jax.config.update('jax_enable_x64', True). float32 input arrays are fine: "
             "simulate casts them to float64."
         )
+    options = dict(
+        solver=solver,
+        dt=dt,
+        allow_coarse_dt=allow_coarse_dt,
+        rtol=rtol,
+        atol=atol,
+        max_steps=max_steps,
+        max_events=max_events,
+        dtmax=dtmax,
+        piece_solver=piece_solver,
+        flight=flight,
+        autodiff=autodiff,
+        ts=ts,
+        samples=samples,
+        outputs=outputs,
+        throw=throw,
+    )
+    if _is_concrete_tree((model, y0)):
+        # A concrete single call is latency-bound: on the host CPU where the default backend
+        # is an accelerator (`internal.on_host`; the user's own placement wins).
+        with on_host():
+            return _simulate_checked(model, y0, t_span, **options)
+    return _simulate_checked(model, y0, t_span, **options)
+
+
+def _simulate_checked(
+    model,
+    y0,
+    t_span,
+    *,
+    solver,
+    dt,
+    allow_coarse_dt,
+    rtol,
+    atol,
+    max_steps,
+    max_events,
+    dtmax,
+    piece_solver,
+    flight,
+    autodiff,
+    ts,
+    samples,
+    outputs,
+    throw,
+) -> Solution:
+    """`simulate` after its first checks: the rest of the validation, then the solve."""
     outputs = _check_outputs(model, outputs)
     y0 = _check_y0(model, y0)
     t0, t1 = _time_span(t_span)

@@ -5,7 +5,8 @@ range; the output-path checks every command runs before any work, and the writer
 never leaves a partial file; how a message shows a user's paths and values (`_text.py`:
 control characters escaped, numbers in bounded width); the command line's
 error types and exit codes, and how a package registers a `jaxunilat` command
-(`_cli.py`: the `jaxunilat.commands` entry points). `identify` imports only
+(`_cli.py`: the `jaxunilat.commands` entry points); where latency-bound work runs on a
+machine whose default backend is an accelerator (`_placement.py`: the host CPU). `identify` imports only
 jaxunilat's public API and this module (a test checks it), so the two packages depend
 one way.
 
@@ -38,6 +39,12 @@ from ._io import (
     check_output_paths as check_output_paths,
     special_kind as special_kind,
     write_atomically as write_atomically,
+)
+from ._placement import (
+    host_device as host_device,
+    keep_placement as keep_placement,
+    latency_bound as latency_bound,
+    on_host as on_host,
 )
 from ._text import (
     bounded_numbers as bounded_numbers,

@@ -151,7 +151,11 @@ def _environment() -> str:
 def _environment_text(xla_flags: str) -> str:
     import jaxlib
 
-    device = jax.devices()[0]
+    # The device new computations go to: JAX's default one, or the one placed by
+    # `jax.default_device` (the host, for latency-bound work on an accelerator machine).
+    device = jax.config.jax_default_device or jax.devices()[0]
+    if isinstance(device, str):  # a platform name
+        device = jax.devices(device)[0]
     settings = sorted((k, v) for k, v in jax.config.values.items() if "cache" not in k)
     return repr(
         (
