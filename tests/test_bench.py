@@ -380,3 +380,22 @@ def test_command_line_pair_runs_twice_in_fresh_processes_on_one_new_cache(monkey
     row = _bench_user._cli_pair("bad", lines.append)
     assert row["ok"] is False and row["ratio"] is None and row["runs"][0]["returncode"] == 2
     assert "failed" in lines[-1]
+
+
+def test_accelerator_section_on_an_accelerator_and_skipped_on_a_cpu(monkeypatch):
+    """On a CPU backend the section says it was skipped; where the default backend is an
+    accelerator (stood in for by the CPU reporting "gpu") it measures sweeps at each N,
+    one call's latency on the device and by default, and puts the compiled loop's rows
+    beside them."""
+    from jaxunilat._bench import _accelerator
+
+    lines = []
+    assert _accelerator.accelerator_section(lines.append)["status"].startswith("skipped")
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    compiled = {"throughput": [{"method": "compiled loop, prange", "n": 8, "traj_per_s": 1.0, "wrong_rows": 0}]}
+    out = _accelerator.accelerator_section(lines.append, ns=(4, 8), repeats=2, fit=False, compiled=compiled)
+    assert out["status"] == "measured" and [r["n"] for r in out["sweep"]] == [4, 8]
+    assert all(r["all_ok"] and r["traj_per_s"] > 0 for r in out["sweep"])
+    assert out["latency"]["accelerator_s"] > 0 and out["latency"]["default_s"] > 0
+    assert out["compiled_loop"][0]["method"] == "compiled loop, prange"
+    assert out["fit"] == {"status": "skipped at this size"}

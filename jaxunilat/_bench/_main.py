@@ -41,6 +41,7 @@ from collections.abc import Callable
 import numpy as np
 
 from . import _peers as peers, _user as user
+from ._accelerator import accelerator_section
 from ._goals import THROUGHPUT_ERROR, TIGHT_ERROR, goal_table as goal_table, goals
 from ._scale import SAMPLES, T1, Y0, process_section
 
@@ -76,6 +77,8 @@ class Size:
     # run twice in fresh processes), and whether user_grad_ratio (its reverse-mode compile
     # is the slowest of the section) and default_user_ratio (two fresh processes) run.
     user_n: int = 1000
+    # The accelerator section's sweep sizes (on a CPU backend it is skipped).
+    accelerator_ns: tuple[int, ...] = (1_000, 10_000, 100_000, 1_000_000)
     user_cli: tuple[str, ...] = ("simulate", "identify", "reproduce")
     user_grad: bool = True
     default_user: bool = True
@@ -144,6 +147,7 @@ SIZES = {
         min_time_s=0.1,
         max_repeats=21,
         user_n=100,
+        accelerator_ns=(1_000, 10_000),
         user_cli=("simulate", "identify"),  # reproduce --quick adds ~15 s: the full size runs it
         compare_ns=(),  # ~20 s of compiles; user_vmap_ratio times plain vmap against rows one by one
         scale_processes=(),  # a process start-up and compile per count (tests/test_distributed_sweep.py)
@@ -173,6 +177,7 @@ SIZES = {
         min_time_s=0.0,
         compare_ns=(),  # the vmapped sweep beside rows one by one: tests/test_sweep.py
         user_n=4,
+        accelerator_ns=(4, 8),
         # The users' code in fresh processes and its reverse-mode compile (~90 s on 2 cores):
         # tests/test_bench.py runs the command-line pair on a fast command.
         user_cli=(),
@@ -930,6 +935,13 @@ def run_bench(size_name: str = "full", log: Callable[[str], None] = print) -> di
         lambda fn: _timed(fn, size),
         log,
         own=own,
+    )
+    result["accelerator"] = accelerator_section(
+        log,
+        ns=size.accelerator_ns,
+        repeats=max(2, size.repeats),
+        fit=size.name == "full",
+        compiled=result["compiled_loop"],
     )
     result["scale_out"] = _scale_out(size, log) if size.scale_out else {"how": f"skipped at size {size.name}"}
     result["scale_out"].setdefault("rows", [])
