@@ -219,12 +219,14 @@ def test_read_audio_keeps_the_channels_when_asked(tmp_path, reference):
 
     x, _ = reference
     path = _four_channels(tmp_path / "four.wav", x)
-    samples, rate, description = read_audio(path, mono=False)
-    assert samples.shape == (len(x), 4) and rate == RATE and "4 channels" in description
-    np.testing.assert_array_equal(samples[:, 0], x / 32768.0)
-    mono, _, description = read_audio(path)
-    np.testing.assert_allclose(mono, samples.mean(axis=1), rtol=0, atol=0)
-    assert "4 channels mixed to mono" in description
+    audio = read_audio(path, mono=False)
+    assert audio.samples.shape == (len(x), 4) and audio.rate == RATE and "4 channels" in audio.describe()
+    np.testing.assert_array_equal(audio.samples[:, 0], x / 32768.0)
+    mono = read_audio(path)
+    np.testing.assert_allclose(mono.samples, audio.samples.mean(axis=1), rtol=0, atol=0)
+    assert "4 channels mixed to mono" in mono.describe() and mono.start == 0.0
+    with pytest.raises(TypeError):  # a record, read by its attributes: no tuple to unpack
+        tuple(mono)
 
 
 # -- what cannot be read ------------------------------------------------------------------------

@@ -5,11 +5,20 @@
                      [--threshold K] [--dead-time S] [--min-gap S]
     jaxunilat import phyphox SOURCE.csv|.xlsx --mass KG --diameter M --out DATA.csv [...]
     jaxunilat import video CLIP.mp4 --ball NAME --out DATA.csv [--color C] [--roi X0,Y0,X1,Y1] [--plot PNG]
+                     [--onsets-out IMPACTS.csv]
     jaxunilat import video SOURCE.csv --ball NAME --out DATA.csv [--column NAME] [--scale F] [--fps F]
                      [--flip] [--floor Y] [--measured scale,level] [...]
 
 `import audio` is another name for `import wav`: it reads every audio format (WAV by
 scipy; m4a/AAC, mp3, ogg, opus, flac, 3gp by PyAV, the `video` extra).
+
+`import video CLIP --onsets-out IMPACTS.csv` also reads the clip's soundtrack: its clicks
+become an impacts data file (what `import wav CLIP` writes), and the report says how
+they agree with the video's impacts (median and max |video - audio| in ms, within one
+frame period or not, a constant offset between the two clocks). A clip without an audio
+stream, with a silent one, or whose clicks are not one ball's (unless `--force`) writes
+no such file and says why; the exit status stays the trace's. IMPACTS.csv must differ
+from `--out`, `--plot` and CLIP.
 
 The ball must be stated: `--ball NAME` (a preset of `identify.BALLS`), or `--mass`
 with `--diameter` (or `--drag`); `--mass`, `--diameter`, `--drag` override a preset's.
@@ -113,7 +122,8 @@ def register(commands) -> None:
         "import",
         help="turn a recording (audio, phyphox export, video, video-tracking CSV) into a data file",
         description="Turn a real-world recording into a jaxunilat data file (format: data/README.md): impact "
-        "onsets from an audio recording or a phyphox export, or a height trace from a video-tracking table. "
+        "onsets from an audio recording or a phyphox export, or a height trace from a video clip or a video-tracking "
+        "table (a clip's soundtrack too, as impacts: import video CLIP --onsets-out FILE). "
         "Prints the onsets kept and those left out with reasons; the source file is only read. The ball must be "
         "stated (--ball NAME, or --mass with --diameter or --drag): its mass and drag go into the data file. "
         + _bounds(),
@@ -136,6 +146,7 @@ def _ball_options(args) -> dict:
 def _plot_import(result, args) -> None:
     """Draw what was imported into --plot, by what the import found: an audio detection's
     envelope and onsets, a clip's trace and contact sheet, or a table's import."""
+    from jaxunilat.internal import printable
     from jaxunilat.plot import save_figure
 
     from .. import OnsetDetection
@@ -146,7 +157,7 @@ def _plot_import(result, args) -> None:
         return
     plot = plot_detection if result.detection is not None else plot_table_import
     save_figure(plot(result), args.plot)
-    print(f"{'wrote':<10} {args.plot}")
+    print(f"{'wrote':<10} {printable(args.plot)}")
 
 
 def sheet_path(plot: str) -> str:
@@ -160,14 +171,15 @@ def sheet_path(plot: str) -> str:
 def _plot_clip(trace, plot: str) -> None:
     """A clip's trace figure into `plot` and its contact sheet (the frames with the track
     drawn on them) beside it."""
+    from jaxunilat.internal import printable
     from jaxunilat.plot import save_figure
 
     from .._report._plot_video import plot_video_contact_sheet, plot_video_trace
 
     save_figure(plot_video_trace(trace), plot)
-    print(f"{'wrote':<10} {plot}")
+    print(f"{'wrote':<10} {printable(plot)}")
     save_figure(plot_video_contact_sheet(trace), sheet_path(plot))
-    print(f"{'wrote':<10} {sheet_path(plot)}")
+    print(f"{'wrote':<10} {printable(sheet_path(plot))}")
 
 
 def _refused(err, args) -> int:
@@ -176,7 +188,7 @@ def _refused(err, args) -> int:
     import dataclasses
     import sys
 
-    from jaxunilat.internal import PROG, output_errors
+    from jaxunilat.internal import PROG, output_errors, printable
 
     if err.result is not None:
         print(dataclasses.replace(err.result, problems=()).summary())
@@ -184,8 +196,10 @@ def _refused(err, args) -> int:
             with output_errors():
                 _plot_import(err.result, args)
     reasons = " ".join("; ".join(err.problems).split())
+    onsets = getattr(args, "onsets_out", None)
+    where = printable(args.out) + ("" if onsets is None else f" nor {printable(onsets)}")
     print(
-        f"{PROG}: not one bouncing ball: {reasons}; nothing written to {args.out} (--plot shows the import, "
+        f"{PROG}: not one bouncing ball: {reasons}; nothing written to {where} (--plot shows the import, "
         f"--force writes it anyway): exit status {EXIT_NOT_A_BALL}",
         file=sys.stderr,
     )
@@ -215,9 +229,11 @@ def _run_import(args) -> int:
         check_plot_format,
         input_errors,
         output_errors,
+        printable,
     )
 
     from .. import ImplausibleRecording, ball_spec
+    from .._data._import import check_noise
     from .._data._source import refuse_special
 
     with input_errors():
@@ -225,12 +241,14 @@ def _run_import(args) -> int:
             ball_spec(**_ball_options(args), cli=True)
         except ValueError as err:
             raise InputError(f"import {args.source_kind}: {err}") from None
+        check_noise(args.noise, args.importer.observe)  # its unit and range: before SOURCE is read
         refuse_special(args.source)  # never opened: a FIFO would wait for a writer
         clip = args.importer.contact_sheet(args.source)
         sheet = sheet_path(args.plot) if args.plot is not None and clip else None
+        onsets = getattr(args, "onsets_out", None)  # `import video` only
         check_output_paths(
             ("--out", args.out), ("--plot", args.plot), ("--plot (its contact sheet)", sheet),
-            inputs=(("SOURCE", args.source),),
+            ("--onsets-out", onsets), inputs=(("SOURCE", args.source),),
         )  # fmt: skip
     check_plot_format(args.plot)
     result = _imported(args)
@@ -239,7 +257,16 @@ def _run_import(args) -> int:
     print(result.summary())
     with output_errors():
         result.write(args.out, overwrite=True)
-        print(f"{'wrote':<10} {args.out} ({result.dataset.observe}: {result.dataset.num_rows} rows)")
+        print(
+            f"{'wrote':<10} {printable(args.out)} ({result.dataset.observe}: {result.dataset.num_rows} rows)"
+        )
+        if onsets is not None and result.soundtrack is not None:
+            sound = result.soundtrack
+            sound.write(onsets, overwrite=True)
+            print(
+                f"{'wrote':<10} {printable(onsets)} ({sound.dataset.observe}: {sound.dataset.num_rows} rows, the "
+                "clip's soundtrack)"
+            )
         if args.plot is not None:
             _plot_import(result, args)
     return EXIT_OK

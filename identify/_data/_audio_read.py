@@ -1,8 +1,7 @@
 """A recording's samples: WAV through `scipy.io.wavfile`, every other format through PyAV.
 
 `read_audio(path)` is the one reader of every import: a `WavAudio` record (samples,
-rate, channels, bits, encoding, container, `describe()`; it also unpacks as the triple
-(samples, rate, description)).
+rate, channels, bits, encoding, container, start, `describe()`).
 
 - WAV (RIFF, RF64, RIFX) in PCM (8-bit unsigned, 16, 24, 32, 64-bit) or IEEE float (32,
   64-bit), plain or WAVE_FORMAT_EXTENSIBLE: `scipy.io.wavfile` (imported on use: importing
@@ -84,8 +83,8 @@ class WavAudio:
       μ-law and A-law, which keep every sample's time but not its level).
     - `bit_rate`: the stream's bit rate, bit/s (None where the container gives none).
     - `notes`: what the decoding changed (gaps in the time stamps filled with silence).
-
-    It unpacks as (samples, rate, description): `samples, rate, what = read_audio(path)`.
+    - `start`: the first sample's time on the container's clock, s (its presentation
+      time stamp: where a video's soundtrack starts against its picture; 0 for WAV).
     """
 
     samples: np.ndarray
@@ -98,10 +97,7 @@ class WavAudio:
     lossy: bool = False
     bit_rate: float | None = None
     notes: tuple[str, ...] = ()
-
-    def __iter__(self):
-        """(samples, rate, `describe()`), for `samples, rate, what = read_audio(path)`."""
-        return iter((self.samples, self.rate, self.describe()))
+    start: float = 0.0
 
     @property
     def framed(self) -> bool:
@@ -129,6 +125,11 @@ class WavAudio:
         extra = "".join(f"; {n}" for n in self.notes)
         extra += "" if self.encoding in ("pcm", "float") else " (decoded by PyAV)"
         return f"{self.container}, {self.rate:g} Hz, {kind}, {chans}, {self.duration:.3f} s{extra}"
+
+
+class NoAudioStream(InputError):
+    """`read_audio` of a container that holds no audio stream (a video clip without a
+    soundtrack): an `InputError` a caller can tell apart from an unreadable one."""
 
 
 def read_audio(path, *, mono: bool = True) -> WavAudio:
@@ -326,7 +327,7 @@ def _decode(name: str, kind: str | None, mono: bool, encoding: str | None = None
     with container:
         kind = kind or container.format.long_name
         if not container.streams.audio:
-            raise InputError(f"{name}: the {kind} file holds no audio stream")
+            raise NoAudioStream(f"{name}: the {kind} file holds no audio stream")
         stream = container.streams.audio[0]
         if stream.codec_context is None:  # FFmpeg knows no decoder for it
             what = f"{encoding} WAV" if encoding else f"{kind} audio"
@@ -345,6 +346,7 @@ def _decode(name: str, kind: str | None, mono: bool, encoding: str | None = None
         samples, float(got.rate), got.channels, 8 if codec.name in ("pcm_mulaw", "pcm_alaw") else 0,
         _CODEC_NAMES.get(codec.name, codec.name), name, container=kind, lossy=lossy,
         bit_rate=float(codec.bit_rate) if codec.bit_rate else None, notes=got.notes(),
+        start=float(got.first) if got.first is not None else 0.0,
     )  # fmt: skip
 
 

@@ -37,7 +37,8 @@ level were estimated rather than measured, or measured; a fit frees what was
 estimated and holds what was measured), `source` (optional free text).
 
 Parsing is plain text: nothing is executed, evaluated or unpickled; numbers are
-matched by a decimal-literal pattern and converted with `float`.
+matched by a decimal-literal pattern and converted with `float`. Only a regular file is
+read (a FIFO or a device is refused before it is opened), up to `MAX_DATA_BYTES`.
 """
 
 from __future__ import annotations
@@ -65,6 +66,9 @@ KEYS = (
 #: scale and contact level (the fit's nuisance parameters `scale` and `level`).
 PROVENANCE_NAMES = ("x0", "v0", "scale", "level")
 _LIST_KEYS = ("estimated", "measured")
+#: The largest data file read, bytes (`read_bytes`): a trace of a million rows is about
+#: 30 MB; beyond this a file is a wrong one, not an experiment.
+MAX_DATA_BYTES = 100_000_000
 #: The physical range of `noise` by its unit, (lowest, highest): m for trace and apex
 #: (a nanometre to a metre), s for impacts (a tenth of a microsecond to a second). Beyond
 #: it a fit's weights overflow or vanish: the value is a slip, not a measurement.
@@ -367,23 +371,21 @@ def _validate_provenance(ds: Dataset, where: _Where) -> None:
 
 def read_bytes(path, what: str = "a data file") -> tuple[bytes, str]:
     """A file's bytes and its name for messages; one-line `ValueError`s for a bad path,
-    a directory (`what` says what was expected), a missing or unreadable file."""
+    a directory (`what` says what was expected), a missing or unreadable file, a FIFO or
+    a device (refused before it is opened: a FIFO would wait for a writer, `/dev/zero`
+    never ends), and a file larger than `MAX_DATA_BYTES` (`_source.read_source`)."""
+    from ._source import read_source
+
     try:
         name = os.fspath(path)
     except TypeError:
         raise InputError(f"path = {shown(path)} is not a file path") from None
     if isinstance(name, bytes):
         name = os.fsdecode(name)
-    label = printable(name)
-    if os.path.isdir(name):
-        raise InputError(f"{label}: is a directory, not {what}")
-    try:
-        with open(name, "rb") as f:
-            return f.read(), name
-    except FileNotFoundError:
-        raise InputError(f"{label}: no such file") from None
-    except OSError as err:
-        raise InputError(f"{label}: cannot be read ({err.strerror or err})") from None
+    return read_source(
+        name, MAX_DATA_BYTES, what=what, kind="data file", hint="write the data to a regular file and pass that",
+        cut="a data file holds one experiment (thin a trace's rows, or split the file)",
+    )  # fmt: skip
 
 
 def _read_text(path) -> tuple[str, str]:

@@ -20,7 +20,15 @@ import numpy as np
 from jaxunilat.internal import InputError
 
 from ._balls import BallSpec, ball_spec
-from ._format import DEFAULT_GRAVITY, Dataset, _parse, format_dataset, write_text
+from ._format import (
+    DEFAULT_GRAVITY,
+    NOISE_RANGE,
+    Dataset,
+    _parse,
+    format_dataset,
+    noise_unit,
+    write_text,
+)
 
 #: The restitution assumed when the release height x0 is estimated from the first interval.
 ASSUMED_RESTITUTION = 0.95
@@ -69,6 +77,9 @@ class ImportResult:
     - `detection`: the onset detection of a WAV import (`OnsetDetection`), else None.
     - `problems`: why the onsets are not those of one bouncing ball (`bounce_problems`),
       kept only because the import was forced; () for a plausible sequence.
+    - `soundtrack`: a video clip's soundtrack imported as impacts (`import_video(...,
+      soundtrack=True)`: an `ImportResult` of its own, onsets in s on the soundtrack's
+      clock), else None (also where it gave none: the notes say why).
     """
 
     dataset: Dataset
@@ -83,6 +94,7 @@ class ImportResult:
     info: tuple[str, ...] = ()
     detection: object | None = None
     problems: tuple[str, ...] = ()
+    soundtrack: ImportResult | None = None
 
     def summary(self) -> str:
         """The report, several lines: source, onsets kept and left out, noise, data set."""
@@ -169,6 +181,8 @@ class Importer:
       `ImplausibleRecording` for what is not one ball's drop, `ValueError` for bad input.
     - `contact_sheet(source)`: whether `--plot` of this SOURCE also draws a contact sheet
       of its frames beside the figure (a video clip), so that path is checked too.
+    - `observe`: what its data sets observe, "impacts" or "trace": the unit and range of
+      `--noise` (`check_noise`, before SOURCE is read).
     """
 
     name: str
@@ -181,6 +195,7 @@ class Importer:
     add_arguments: Callable
     run: Callable
     contact_sheet: Callable = _no_frames
+    observe: str = "impacts"
 
 
 #: The help of `--x0` of the impacts importers (`import wav`, `import phyphox`).
@@ -197,16 +212,36 @@ def common_keywords(args) -> dict:
     return {name: getattr(args, name) for name in COMMON_OPTIONS}
 
 
-def check_options(*, ball, mass, diameter, drag, air_density, x0, v0, noise) -> BallSpec:
+def check_options(*, ball, mass, diameter, drag, air_density, x0, v0, noise, observe=None) -> BallSpec:
     """Validate the metadata options (None: the default; `ValueError` names the flag) and
-    return the ball's mass and drag (`ball_spec`: the ball must be stated)."""
+    return the ball's mass and drag (`ball_spec`: the ball must be stated). `noise` must be
+    > 0 and, given the import's `observe` ("impacts": s; "trace", "apex": m), within the
+    data format's `NOISE_RANGE` for it (`check_noise`)."""
     from jaxunilat.internal import check_range
 
     spec = ball_spec(ball, mass=mass, diameter=diameter, drag=drag, air_density=air_density)
     check_range("x0", x0, lo=0.0, unit="m", allow_none=True)
     check_range("v0", v0, unit="m/s", allow_none=True)
     check_range("noise", noise, lo=0.0, lo_open=True, allow_none=True)
+    if observe is not None:
+        check_noise(noise, observe)
     return spec
+
+
+def check_noise(noise: float | None, observe: str) -> None:
+    """Refuse an importer's `--noise` outside the data format's `NOISE_RANGE` for `observe`
+    (impacts: s; trace, apex: m), in one line naming the flag, the value and the range,
+    before the source is read (None: not given)."""
+    if noise is None:
+        return
+    unit = noise_unit(observe)
+    lo, hi = NOISE_RANGE[unit]
+    if not lo <= noise <= hi:
+        what = "onset-time" if unit == "s" else "position"
+        raise InputError(
+            f"--noise {noise:g} {unit} is out of range; valid range is [{lo:g}, {hi:g}] {unit} for an import of "
+            f"observe = {observe} (the {what} standard deviation, in {'seconds' if unit == 's' else 'metres'})"
+        )
 
 
 def x0_from_first_interval(interval: float, *, restitution: float = ASSUMED_RESTITUTION) -> float:

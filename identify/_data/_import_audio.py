@@ -1,8 +1,9 @@
 """Impact onsets from an audio recording: the click detector and the WAV importer.
 
 `import_wav` reads the recording with `_audio_read.read_audio` (WAV by scipy, m4a/AAC,
-mp3, ogg, opus, flac, 3gp and the rest by PyAV), its channels mixed to mono; `read_wav`
-is that same function under its public name. `WAV` is the importer's command line
+mp3, ogg, opus, flac, 3gp and the rest by PyAV), its channels mixed to mono, then
+`import_samples` imports what was read (as it does a video clip's soundtrack,
+`import video --onsets-out`); `read_wav` is `read_audio` under its public name. `WAV` is the importer's command line
 (`jaxunilat import wav`, alias `audio`).
 
 `detect_onsets` finds the impacts of one bouncing ball, with one set of defaults for every
@@ -41,6 +42,7 @@ import numpy as np
 from jaxunilat.internal import InputError
 
 from ._audio_read import RATE_RANGE as RATE_RANGE, WavAudio as WavAudio, read_audio
+from ._balls import BallSpec
 from ._import import (
     MAX_SPAN,
     RESTITUTION_RANGE,
@@ -777,14 +779,34 @@ def import_wav(
     reasons, the timing-noise estimate, `summary()`).
     """
     spec = check_options(
-        ball=ball, mass=mass, diameter=diameter, drag=drag, air_density=air_density, x0=x0, v0=v0, noise=noise
-    )
+        ball=ball, mass=mass, diameter=diameter, drag=drag, air_density=air_density, x0=x0, v0=v0, noise=noise,
+        observe="impacts",
+    )  # fmt: skip
     audio = read_audio(path)
     det = detect_onsets(
         audio.samples, audio.rate, threshold=threshold, dead_time=dead_time, min_gap=min_gap, rise=rise
     )
+    return import_samples(audio, det, spec, x0=x0, v0=v0, noise=noise, force=force)
+
+
+def import_samples(
+    audio: WavAudio,
+    det: OnsetDetection,
+    spec: BallSpec,
+    *,
+    x0: float | None = None,
+    v0: float | None = None,
+    noise: float | None = None,
+    force: bool = False,
+) -> ImportResult:
+    """`import_wav` of a recording already read: `audio` (`read_audio`, mono; `path` names
+    it), `det` (`detect_onsets` of its samples), the ball `spec` (`check_options`); `x0` (m),
+    `v0` (m/s), `noise` (s), `force` as there. The same data set, notes and gate as
+    `import_wav` of `audio.path` with the detector's settings of `det` (a video clip's
+    soundtrack is imported so, once decoded). The onsets are on the recording's clock (0:
+    its first sample)."""
     onsets = det.onsets
-    name = os.fspath(path)
+    name = os.fspath(audio.path) if audio.path is not None else "samples"
     s = det.settings
     if len(onsets) < 2:
         raise InputError(

@@ -2,8 +2,10 @@
 
 `import_video` dispatches: a video clip (MP4/MOV, Matroska/WebM, AVI, MPEG-PS, by its
 first bytes) goes to `_video_trace.import_video_clip`, a table (Tracker, OpenCV, hand
-tracking: `_table_read.read_table`) to `_import_tracking_table` here. `VIDEO` is the
-command line of both.
+tracking: `_table_read.read_table`) to `_import_tracking_table` here. A clip's soundtrack
+can be imported too (`soundtrack=True`, `--onsets-out`): its clicks as impacts, by the
+same reader and detector as `import_wav`, compared with the picture's impacts
+(`SoundAgreement`). `VIDEO` is the command line of both.
 """
 
 from __future__ import annotations
@@ -16,14 +18,17 @@ import numpy as np
 
 from jaxunilat.internal import InputError
 
+from ._balls import ball_spec
 from ._import import (
     ImplausibleRecording,
     Importer,
     ImportResult,
     Rejected,
+    check_noise,
     check_options,
     common_keywords,
     drop_dataset,
+    ratio_chain,
 )
 from ._source import refuse_special
 from ._table_read import (
@@ -59,14 +64,28 @@ def import_video(
     color=None,
     roi=None,
     force: bool = False,
+    soundtrack: bool = False,
 ) -> ImportResult:
     """A height trace from a video clip (mp4, mov, avi, mkv, webm: `import_video_clip`, the
     `video` extra) or from a video-tracking table (Tracker, OpenCV, hand tracking), as a
     trace data set.
 
     A clip is tracked automatically (`color`, `roi`: hints; `force`: keep a clip whose
-    track is implausible); the rest of this docstring is about tables, for which `color`
-    and `roi` do not apply (nor the table options to a clip).
+    track is implausible); the rest of this docstring is about tables, for which `color`,
+    `roi` and `soundtrack` do not apply (nor the table options to a clip).
+
+    **A clip's soundtrack** (`soundtrack=True`; the command line's `--onsets-out FILE`): its
+    audio stream is read (`read_audio`) and its clicks imported as `import_wav` imports a
+    recording (`import_samples`: the same detector, ball, defaults and gate), into the
+    result's `soundtrack` (an impacts `ImportResult`, the file `--onsets-out` writes). The
+    notes say how its onsets agree with the clip's impacts, where successive flight
+    parabolas meet (`SoundAgreement`: median and largest |video − audio| in ms over the
+    onsets paired with their nearest impact, whether within one frame period, and a
+    constant offset between the two clocks where one lines them up). A clip with no audio
+    stream, a silent one (digital silence, or no click above its noise floor), one that
+    cannot be decoded, or clicks that are not one bouncing ball's (the audio's own gate;
+    `force` keeps them, as it keeps an implausible track) give no `soundtrack`: the notes
+    say why, and the trace is returned all the same.
 
     The table has a header row naming the columns with units (`t (s)`, `y (cm)`),
     possibly after a preamble line (Tracker writes the object's name, e.g. `mass A`).
@@ -113,6 +132,7 @@ def import_video(
 
     refuse_special(path)  # before its first bytes are read: a FIFO would wait for a writer
     ball_keywords = dict(ball=ball, mass=mass, diameter=diameter, drag=drag, air_density=air_density)
+    check_noise(noise, "trace")
     if is_video_file(path):
         _clip_only_options(
             column=column,
@@ -126,9 +146,17 @@ def import_video(
         )
         from ._video_trace import import_video_clip
 
-        return import_video_clip(path, **ball_keywords, noise=noise, color=color, roi=roi, force=force)
+        result = import_video_clip(path, **ball_keywords, noise=noise, color=color, roi=roi, force=force)
+        if not soundtrack:
+            return result
+        return with_soundtrack(result, path, ball_spec(**ball_keywords), force=force)
     if color is not None or roi is not None:
         raise InputError("color and roi apply to a video clip; this source is a tracking table")
+    if soundtrack:
+        raise InputError(
+            "--onsets-out (the soundtrack's impacts) applies to a video clip; this source is a tracking table, "
+            "which has no soundtrack (import the clip's audio with jaxunilat import wav CLIP)"
+        )
     return _import_tracking_table(
         path, column=column, scale=scale, ball_keywords=ball_keywords, x0=x0, v0=v0, noise=noise, fps=fps,
         flip=flip, floor=floor, measured=measured, force=force,
@@ -141,7 +169,7 @@ def _import_tracking_table(
     """`import_video` of a tracking table (the arguments as there)."""
     from jaxunilat.internal import check_range
 
-    spec = check_options(**ball_keywords, x0=x0, v0=v0, noise=noise)
+    spec = check_options(**ball_keywords, x0=x0, v0=v0, noise=noise, observe="trace")
     check_range("scale", scale, lo=0.0, lo_open=True, unit="m per unit", allow_none=True)
     check_range("fps", fps, lo=0.0, lo_open=True, unit="frames/s", allow_none=True)
     check_range("floor", floor, allow_none=True)
@@ -458,6 +486,246 @@ def _video_rows(
     return np.asarray(t), np.asarray(x), lines
 
 
+# -- a clip's soundtrack ------------------------------------------------------------------
+
+#: An offset between the soundtrack's clock and the picture's is reported only where it
+#: lines up at least this many onsets with impacts within one frame.
+MIN_OFFSET_PAIRS = 3
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class SoundAgreement:
+    """How a clip's soundtrack onsets agree with its picture's impacts (`sound_agreement`).
+
+    - `onsets`: the audio onsets, s on the container's clock; `impacts`: the video's
+      impacts (where successive flight parabolas meet), s, same clock; `frame`: the
+      picture's frame period, s (one unique frame: repeated frames left out).
+    - `pairs`: (onset index, impact index) of each onset paired with its nearest impact
+      (`_pairs`); `dt`: video − audio of each pair, s.
+    - `offset`: a constant video − audio offset, s, that lines the onsets up with the
+      impacts where the clocks disagree by more than a frame (None: not needed, or none
+      lines up `MIN_OFFSET_PAIRS`); `residual`: video − audio − `offset` of the pairs it
+      makes, s.
+    """
+
+    onsets: np.ndarray
+    impacts: np.ndarray
+    frame: float
+    pairs: tuple[tuple[int, int], ...]
+    dt: np.ndarray
+    offset: float | None = None
+    residual: np.ndarray | None = None
+
+    @property
+    def within_frame(self) -> bool:
+        """Whether every paired onset is within one frame period of its impact (as recorded, no offset)."""
+        return bool(len(self.dt)) and float(np.max(np.abs(self.dt))) <= self.frame
+
+    def lines(self) -> tuple[list[str], list[str]]:
+        """(notes, warnings) in words, times in ms."""
+        n, k, ms = len(self.onsets), len(self.impacts), 1e3
+        frame = f"one frame ({self.frame * ms:.1f} ms at {1.0 / self.frame:.3g} frames/s)"
+        head = (
+            f"soundtrack vs picture: {len(self.pairs)} of {n} audio onset(s) paired with the nearest of the clip's "
+            f"{k} impact(s) (where successive flight parabolas meet)"
+        )
+        if not self.pairs:
+            head += ": none lies near an impact"
+        else:
+            a = np.abs(self.dt) * ms
+            head += (
+                f": |video - audio| median {np.median(a):.1f} ms, max {np.max(a):.1f} ms (video - audio median "
+                f"{np.median(self.dt) * ms:+.1f} ms): "
+                + ("within " if self.within_frame else "not within ")
+                + frame
+            )
+        if self.within_frame:
+            return [head], []
+        if self.offset is None:
+            return [], [head + "; no constant offset between the two clocks lines them up either"]
+        r = np.abs(self.residual) * ms
+        lead = "sound before picture" if self.offset > 0 else "picture before sound"
+        return [
+            head,
+            f"a constant offset explains it: the soundtrack's clock is {abs(self.offset) * ms:.1f} ms off the "
+            f"picture's ({lead}; video - audio = {self.offset * ms:+.1f} ms: a screen recording's or the phone's "
+            f"audio latency); without it |video - audio| median {np.median(r):.1f} ms, max {np.max(r):.1f} ms "
+            f"over {len(r)} pairs: "
+            + ("within " if np.max(r) <= self.frame * ms else "not within ")
+            + frame
+            + " (the onsets keep the soundtrack's own clock)",
+        ], []
+
+
+def sound_agreement(onsets, impacts, frame: float) -> SoundAgreement:
+    """Pair the audio `onsets` (s) with the video's `impacts` (s, the same clock) and, where
+    they disagree by more than one `frame` period (s), look for a constant offset between
+    the two clocks that lines them up (`_offset`)."""
+    onsets = np.sort(np.asarray(onsets, dtype=float))
+    impacts = np.sort(np.asarray(impacts, dtype=float))
+    pairs = _pairs(onsets, impacts)
+    dt = np.array([impacts[j] - onsets[i] for i, j in pairs])
+    result = SoundAgreement(onsets, impacts, frame, tuple(pairs), dt)
+    if result.within_frame:
+        return result
+    offset = _offset(onsets, impacts, frame)
+    if offset is None:
+        return result
+    shifted = _pairs(onsets + offset, impacts)
+    residual = np.array([impacts[j] - onsets[i] - offset for i, j in shifted])
+    return dataclasses.replace(result, offset=offset, residual=residual)
+
+
+def _pairs(onsets: np.ndarray, impacts: np.ndarray) -> list[tuple[int, int]]:
+    """(onset index, impact index) of each onset (s, sorted) and its nearest impact (s,
+    sorted), where it lies within half the interval between that impact and its
+    neighbour on the onset's side (an impact at an end: its one interval; a lone impact:
+    any distance); an impact nearest to two onsets keeps the nearer."""
+    if not len(onsets) or not len(impacts):
+        return []
+    gaps = np.diff(impacts)
+    best: dict[int, tuple[int, float]] = {}
+    for i, a in enumerate(onsets):
+        j = int(np.argmin(np.abs(impacts - a)))
+        d = abs(float(impacts[j] - a))
+        if len(gaps):
+            side = j - 1 if a < impacts[j] else j
+            if d > 0.5 * gaps[min(max(side, 0), len(gaps) - 1)]:
+                continue
+        if j not in best or d < best[j][1]:
+            best[j] = (i, d)
+    return sorted((i, j) for j, (i, _) in best.items())
+
+
+def _offset(onsets: np.ndarray, impacts: np.ndarray, frame: float) -> float | None:
+    """The constant video − audio offset, s, that lines `onsets` up with `impacts` (s): of
+    the offsets that put one onset on one impact, the one with the least sum over the
+    onsets of min(r, `frame`)² (r: an onset's distance to its nearest impact, shifted),
+    refined to the median video − audio of its pairs within a frame. None unless it pairs
+    at least `MIN_OFFSET_PAIRS` onsets within a frame (too few to tell an offset from chance)."""
+    if len(onsets) < MIN_OFFSET_PAIRS or len(impacts) < MIN_OFFSET_PAIRS:
+        return None
+    best, least = 0.0, math.inf
+    for d in (impacts[:, None] - onsets[None, :]).ravel():  # memory: one row of onsets at a time
+        cost = float(np.sum(np.minimum(_nearest(onsets + d, impacts), frame) ** 2))
+        if cost < least:
+            best, least = float(d), cost
+    close = [impacts[j] - onsets[i] - best for i, j in _pairs(onsets + best, impacts)]
+    close = [d for d in close if abs(d) <= frame]
+    if len(close) < MIN_OFFSET_PAIRS:
+        return None
+    return best + float(np.median(close))
+
+
+def _nearest(times: np.ndarray, impacts: np.ndarray) -> np.ndarray:
+    """Each of `times`' distance to its nearest of `impacts` (s, sorted, at least one)."""
+    j = np.clip(np.searchsorted(impacts, times), 1, max(len(impacts) - 1, 1))
+    before = np.abs(times - impacts[np.minimum(j - 1, len(impacts) - 1)])
+    return np.minimum(before, np.abs(impacts[np.minimum(j, len(impacts) - 1)] - times))
+
+
+def _video_impacts(result: ImportResult) -> tuple[np.ndarray, float]:
+    """A clip import's impacts, s on the video's clock (where successive flight parabolas
+    meet: the clip importer's own, else `_trace_flights`' from the trace written), and its
+    frame period, s (unique frames)."""
+    ds, trace = result.dataset, result.detection
+    time0 = float(result.accepted[0] - ds.t[0])
+    impacts = getattr(trace, "impacts", None)
+    if impacts is not None and len(impacts):
+        times = np.asarray(impacts, dtype=float).reshape(len(impacts), -1)[:, 0]
+    else:
+        from ._trace_flights import flight_meetings, trace_flights
+
+        meet = flight_meetings(trace_flights(ds.t, ds.x), ds.t)
+        times = np.array([at for _, at, _ in meet], dtype=float) + time0
+    fps = getattr(trace, "fps_unique", None)
+    frame = 1.0 / float(fps) if fps else float(np.median(np.diff(ds.t)))
+    return times, frame
+
+
+def _silence(audio, det) -> str:
+    """Why a soundtrack with no candidate click is silent, in words."""
+    if det.silence >= 0.99 or not np.ptp(audio.samples) > 0:
+        return f"digital silence: {det.silence:.0%} of its {audio.duration:.3f} s repeat one value"
+    return (
+        f"no click rises above {det.settings['threshold']:g} sigma of its noise floor "
+        f"({det.noise_floor:.3g} of full scale) in its {audio.duration:.3f} s"
+    )
+
+
+def with_soundtrack(result: ImportResult, path, spec, *, force: bool = False) -> ImportResult:
+    """`result`, a clip's import, with the clip's soundtrack imported as impacts of the ball
+    `spec` (a `BallSpec`) in `soundtrack` (`read_audio`, `detect_onsets`, `import_samples`:
+    `import_wav` of the clip) and, in its notes, how their onsets agree with the clip's
+    impacts (`sound_agreement`) or why there are none: no audio stream, a silent track,
+    one that cannot be decoded, too few clicks, or clicks that are not one bouncing ball's
+    (the audio's own gate, unless `force`). The trace itself is unchanged."""
+    from ._audio_read import NoAudioStream, read_audio
+    from ._import_audio import detect_onsets, import_samples
+
+    notes, warnings, sound = [], [], None
+    try:
+        audio = read_audio(path)
+    except NoAudioStream:
+        audio = None
+        notes.append(f"the clip has no soundtrack (no audio stream): {_NOTHING}")
+    except InputError as err:
+        audio = None
+        notes.append(f"the clip's soundtrack cannot be read ({err}): {_NOTHING}")
+    det = detect_onsets(audio.samples, audio.rate) if audio is not None else None
+    if det is not None and not len(det.onset):
+        notes.append(f"the clip's soundtrack is silent: {_NOTHING} ({_silence(audio, det)})")
+    elif det is not None:
+        imported, refused = None, None
+        try:
+            sound = imported = import_samples(audio, det, spec, force=force)
+        except ImplausibleRecording as err:
+            imported, refused = err.result, err
+        except InputError as err:
+            notes.append(f"the clip's soundtrack gives no impacts ({err}): {_NOTHING}")
+        if imported is not None:
+            notes.append(_sound_note(audio, det, imported, written=sound is not None))
+        if refused is not None:
+            problems = "; ".join(refused.problems)
+            notes.append(
+                f"{_NOTHING}: the soundtrack's clicks are not one bouncing ball's (the audio's own gate): {problems} "
+                "(--force writes it anyway)"
+            )
+        onsets = imported.accepted if imported is not None else det.onsets
+        if len(onsets):
+            impacts, frame = _video_impacts(result)
+            more_notes, more_warnings = sound_agreement(onsets + audio.start, impacts, frame).lines()
+            notes += more_notes
+            warnings += more_warnings
+    return dataclasses.replace(
+        result,
+        notes=result.notes + tuple(notes),
+        warnings=result.warnings + tuple(warnings),
+        soundtrack=sound,
+    )
+
+
+_NOTHING = "no impacts file written"
+
+
+def _sound_note(audio, det, imported: ImportResult, *, written: bool) -> str:
+    """One line on the soundtrack's impacts: what was read, how many kept, their e."""
+    t = np.asarray(imported.dataset.t, dtype=float)
+    e = ratio_chain(t).restitution if len(t) >= 3 else math.nan
+    ratio = f", e = {e:.3f} from their interval ratios" if math.isfinite(e) else ""
+    start = f", starting at {audio.start:.6g} s on the clip's clock" if audio.start else ""
+    where = (
+        "; its impacts data set is the result's soundtrack (the file --onsets-out writes: what jaxunilat import "
+        "wav of the clip writes)"
+        if written
+        else ""
+    )
+    return (
+        f"the clip's soundtrack ({audio.describe()}{start}): {len(t)} impact onset(s) on the bouncing ball's "
+        f"chain of {len(det.onset)} candidate clicks{ratio}{where}"
+    )
+
+
 # -- the command line --------------------------------------------------------------------
 
 
@@ -469,6 +737,15 @@ def _add_arguments(v) -> None:
         metavar="X0,Y0,X1,Y1",
         type=_roi,
         help="clips: search for the ball only in this rectangle, pixels of the picture as displayed (y down)",
+    )
+    v.add_argument(
+        "--onsets-out",
+        metavar="FILE",
+        help="clips: also read the clip's soundtrack and write its impact clicks to FILE as an impacts data file "
+        "(what jaxunilat import wav of the clip writes: the same detector, ball and gate), reporting how its "
+        "onsets agree with the video's impacts (median and max |video - audio|, ms; within one frame or not; a "
+        "constant offset between the clocks); no audio stream, a silent track or clicks that are not one "
+        "ball's (--force writes those) write no FILE and leave the trace's import and exit status as they are",
     )
     v.add_argument(
         "--column", metavar="NAME", help="the height column (default: y if present, else the second column)"
@@ -525,7 +802,10 @@ def _roi(text: str) -> tuple[int, int, int, int]:
 def _run(args) -> ImportResult:
     options = ("column", "scale", "color", "roi", "fps", "flip", "floor", "measured")
     return import_video(
-        args.source, **{name: getattr(args, name) for name in options}, **common_keywords(args)
+        args.source,
+        **{name: getattr(args, name) for name in options},
+        **common_keywords(args),
+        soundtrack=args.onsets_out is not None,
     )
 
 
@@ -550,7 +830,10 @@ VIDEO = Importer(
     "units (t (s), y (cm)), possibly after a preamble line such as Tracker's 'mass A', or frame numbers "
     "with --fps; repeated rows are left out, and a table whose free flight curves upwards (image "
     "coordinates: --flip) or falls far from 9.81 m/s^2 (a unit or frame-rate slip, named) is refused (exit "
-    "3). Writes observe = trace with t (s, 0 = the first frame kept, not the release) and x (m).",
+    "3). Writes observe = trace with t (s, 0 = the first frame kept, not the release) and x (m). A clip's "
+    "soundtrack: --onsets-out FILE writes its clicks as an impacts data file (as jaxunilat import wav of the "
+    "clip) and reports how they agree with the video's impacts (median and max |video - audio| in ms, within "
+    "one frame or not, a constant offset between the clocks); a clip without sound says so and writes no FILE.",
     source_help="a video clip (mp4, mov, avi, mkv, webm; needs the video extra) or a tracking table, CSV "
     "(only read)",
     x0_help="tables: height at t = 0, m (default: the first sample's height); a clip finds its release",
@@ -558,4 +841,5 @@ VIDEO = Importer(
     add_arguments=_add_arguments,
     run=_run,
     contact_sheet=_is_clip,
+    observe="trace",
 )

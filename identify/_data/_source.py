@@ -4,7 +4,8 @@ A FIFO or a device named as the source is refused before it is opened (`os.stat`
 opening a FIFO waits for a writer, `/dev/zero` never ends, `/dev/stdin` waits for a
 terminal), in one line; so are a directory and a missing file. `read_source` then reads
 at most a stated number of bytes, so that a file that grows while it is read cannot
-exhaust the memory either.
+exhaust the memory either. The messages name the file with its control characters
+escaped (`printable`): one line, nothing a terminal acts on.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from __future__ import annotations
 import os
 import stat
 
-from jaxunilat.internal import InputError
+from jaxunilat.internal import InputError, printable
 
 #: A byte count in words for messages: the unit and its size in bytes.
 _UNITS = (("GB", 1e9), ("MB", 1e6), ("kB", 1e3))
@@ -35,23 +36,28 @@ def source_name(path) -> str:
     return os.fsdecode(name) if isinstance(name, bytes) else name
 
 
-def regular_source(path, what: str = "a data file") -> tuple[str, int]:
+#: What a refusal of a FIFO or device suggests instead, for a recording.
+SAVE_RECORDING = "save the recording to a file and import that"
+
+
+def regular_source(path, what: str = "a data file", *, hint: str = SAVE_RECORDING) -> tuple[str, int]:
     """The name of `path` for messages and its size, bytes, if it is a regular file.
 
     Refused in one line (`InputError`), without opening it: a directory ("is a directory,
     not `what`"), a missing path, and anything that is not a regular file
-    (`refuse_special`). Symlinks are followed.
+    (`refuse_special`; `hint`: what to do instead). Symlinks are followed.
     """
     name = source_name(path)
+    label = printable(name)
     try:
         mode = os.stat(name)
     except FileNotFoundError:
-        raise InputError(f"{name}: no such file") from None
+        raise InputError(f"{label}: no such file") from None
     except OSError as err:
-        raise InputError(f"{name}: cannot be read ({err.strerror or err})") from None
+        raise InputError(f"{label}: cannot be read ({err.strerror or err})") from None
     if stat.S_ISDIR(mode.st_mode):
-        raise InputError(f"{name}: is a directory, not {what}")
-    _refuse(name, mode.st_mode)
+        raise InputError(f"{label}: is a directory, not {what}")
+    _refuse(name, mode.st_mode, hint)
     return name, mode.st_size
 
 
@@ -69,12 +75,9 @@ def refuse_special(path) -> None:
         _refuse(name, mode)
 
 
-def _refuse(name: str, mode: int) -> None:
+def _refuse(name: str, mode: int, hint: str = SAVE_RECORDING) -> None:
     if not stat.S_ISREG(mode):
-        raise InputError(
-            f"{name}: is a {_special_kind(mode)}, not a regular file; save the recording to a file and import "
-            "that"
-        )
+        raise InputError(f"{printable(name)}: is a {_special_kind(mode)}, not a regular file; {hint}")
 
 
 def _special_kind(mode: int) -> str:
@@ -90,26 +93,35 @@ def _special_kind(mode: int) -> str:
     return "special file"
 
 
-def read_source(path, limit: int, *, what: str = "a data file", kind: str = "file") -> tuple[bytes, str]:
-    """The bytes of the regular file `path` (`regular_source`) and its name, refusing a
-    file larger than `limit` bytes in one line naming the limit (`kind`: what the limit
-    is for, e.g. "table"). At most `limit` + 1 bytes are ever read."""
-    name, size = regular_source(path, what)
+def read_source(
+    path,
+    limit: int,
+    *,
+    what: str = "a data file",
+    kind: str = "file",
+    hint: str = SAVE_RECORDING,
+    cut: str = "cut it to the recording of one drop",
+) -> tuple[bytes, str]:
+    """The bytes of the regular file `path` (`regular_source`; `hint`: what a refusal of a
+    FIFO or device suggests) and its name, refusing a file larger than `limit` bytes in one
+    line naming the limit (`kind`: what the limit is for, e.g. "table"; `cut`: what to do
+    instead). At most `limit` + 1 bytes are ever read."""
+    name, size = regular_source(path, what, hint=hint)
     if size > limit:
-        raise InputError(_too_large(name, size, limit, kind))
+        raise InputError(_too_large(name, size, limit, kind, cut))
     try:
         with open(name, "rb") as f:
             raw = f.read(limit + 1)
     except OSError as err:
-        raise InputError(f"{name}: cannot be read ({err.strerror or err})") from None
+        raise InputError(f"{printable(name)}: cannot be read ({err.strerror or err})") from None
     if len(raw) > limit:  # it grew since it was measured
-        raise InputError(_too_large(name, len(raw), limit, kind, grown=True))
+        raise InputError(_too_large(name, len(raw), limit, kind, cut, grown=True))
     return raw, name
 
 
-def _too_large(name: str, size: int, limit: int, kind: str, *, grown: bool = False) -> str:
+def _too_large(name: str, size: int, limit: int, kind: str, cut: str, *, grown: bool = False) -> str:
     more = "more than " if grown else ""
     return (
-        f"{name}: {more}{size_text(size)}, larger than the {size_text(limit)} a {kind} is read up to "
-        f"(the limit keeps a wrong file from filling the memory); cut it to the recording of one drop"
+        f"{printable(name)}: {more}{size_text(size)}, larger than the {size_text(limit)} a {kind} is read up to "
+        f"(the limit keeps a wrong file from filling the memory); {cut}"
     )

@@ -119,15 +119,15 @@ def contradictions(result) -> list[str]:
         if f in missed:
             e_fit, tol = missed[f]
             out.append(
-                f"{_name(d, f)}: the fit's e = {e_fit:.4f} contradicts the e = {form.restitution:.4f} "
-                f"(± {tol:.3f}) that the file's own flight times give in closed form (drag-corrected "
+                f"{_name(d, f)}: the fit's e = {e_fit:.4g} contradicts the e = {form.restitution:.4g} "
+                f"(± {tol:.3g}) that the file's own flight times give in closed form (drag-corrected "
                 f"median of {form.count} bounces): a wrong basin of the fit"
             )
         if not fitted_x0 and form.first is not None and abs(form.first - form.restitution) > FIRST_TOLERANCE:
             h = _implied_height(d, form)
             out.append(
-                f"{_name(d, f)}: the first flight ({float(d.t[1] - d.t[0]):.4f} s) cannot follow a drop from "
-                f"the stated x0 = {float(d.x0):.4g} m with e = {form.restitution:.3f}; it implies about "
+                f"{_name(d, f)}: the first flight ({float(d.t[1] - d.t[0]):.4g} s) cannot follow a drop from "
+                f"the stated x0 = {float(d.x0):.4g} m with e = {form.restitution:.3g}; it implies about "
                 f"{h:.3g} m. The recording may start at a later bounce, or x0 is wrong: give the right "
                 "height, or fit it (--fit x0)"
             )
@@ -137,8 +137,8 @@ def contradictions(result) -> list[str]:
         lo, hi = min(known) - E_TOLERANCE, max(known) + E_TOLERANCE
         if not lo <= e_joint <= hi:
             out.append(
-                f"the joint fit's e = {e_joint:.4f} lies outside the files' own closed-form range "
-                f"{min(known):.4f}-{max(known):.4f}"
+                f"the joint fit's e = {e_joint:.4g} lies outside the files' own closed-form range "
+                f"{min(known):.4g}-{max(known):.4g}"
             )
     return out
 
