@@ -222,7 +222,10 @@ def _fit_laws(datasets, laws: tuple[str, ...], opts: Options, initial: dict) -> 
     with concurrent.futures.ThreadPoolExecutor(
         max_workers=len(laws), thread_name_prefix="identify-law"
     ) as pool:
-        futures = {name: pool.submit(keep_placement(one), name, opts.progress and k == 0) for k, name in enumerate(laws)}
+        futures = {
+            name: pool.submit(keep_placement(one), name, opts.progress and k == 0)
+            for k, name in enumerate(laws)
+        }
         return {name: future.result() for name, future in futures.items()}
 
 
