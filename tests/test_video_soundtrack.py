@@ -223,6 +223,38 @@ def test_clicks_that_are_no_ball_leave_the_video_import_alone(tmp_path, capsys, 
     )
 
 
+def test_a_ball_heard_among_other_sounds_is_kept_where_the_picture_confirms_it(tmp_path, pictures):
+    """The ball's clicks plus twice as many other clicks (a minority chain, which the audio's
+    gate alone refuses): kept where every chain onset falls on one of the picture's impacts;
+    the same other clicks with the ball's clicks shifted off the picture's impacts by 0.1 s
+    (more than a frame, and no single offset lines them up with the picture as well) are
+    refused."""
+    rng = np.random.default_rng(11)
+    others: list[float] = []  # other sounds at random, 50 ms from any click
+    for t in rng.uniform(0.05, SECONDS - 0.05, 400):
+        if len(others) < 2 * len(CLICKS) and np.min(np.abs(np.r_[CLICKS, others] - t)) > 0.05:
+            others.append(float(t))
+    others = np.asarray(others)
+    heard = import_video(
+        write_clip(tmp_path / "room.mp4", pictures, clicks(np.sort(np.r_[CLICKS, others]), seed=3)),
+        ball="pingpong",
+        soundtrack=True,
+    )
+    notes = " ".join(heard.notes)
+    assert "is a minority of its clicks, but each of its" in notes and "kept as the ball's" in notes, notes
+    assert np.max(np.abs(heard.soundtrack.dataset.t - CLICKS)) <= 1.5 / RATE
+    # The ball's chain off the picture: refused by the gate, the picture no witness.
+    shifted = CLICKS * 1.07 + 0.1
+    off = import_video(
+        write_clip(
+            tmp_path / "off.mp4", pictures, clicks(np.sort(np.r_[shifted[shifted < SECONDS - 0.05], others]))
+        ),
+        ball="pingpong",
+        soundtrack=True,
+    )
+    assert off.soundtrack is None and "kept as the ball's" not in " ".join(off.notes)
+
+
 def test_onsets_out_is_checked_before_any_work(tmp_path, capsys, pictures):
     table = tmp_path / "track.csv"
     table.write_text("t (s),y (m)\n0,0.3\n0.033,0.29\n0.067,0.27\n")
@@ -277,20 +309,22 @@ def _real(name: str) -> str:
 def test_real_pingpong_soundtrack_matches_the_picture_after_its_clock_offset(tmp_path):
     """zak_pingpong.mov: its clicks (e = 0.870 by the recordings' README) lie about 109 ms
     before the picture's impacts (a screen recording's audio latency), within a frame after
-    that offset; 24 candidate clicks of which 5 on the chain fail the audio's own gate
-    (a minority), so only --force writes them."""
+    that offset; its 5 chain onsets are a minority of 24 candidate clicks, which alone the
+    audio's gate refuses, but every one falls on an impact of the picture: kept."""
     from identify._data._balls import ball_spec
 
     path = _real("zak_pingpong.mov")
     result = import_video(path, ball="pingpong", soundtrack=True)
     notes = " ".join(result.notes)
-    assert result.soundtrack is None and "no impacts file written: the soundtrack's clicks" in notes
     assert "a constant offset explains it" in notes, notes
     line = next(n for n in result.notes if n.startswith("a constant offset"))
     offset = float(line.split("video - audio = ")[1].split(" ms")[0])
     assert 100 <= offset <= 120 and ": within one frame" in line, line
     pairs = int(line.split(" pairs: ")[0].rsplit(" ", 1)[1])
     assert pairs >= 4, line
+    assert "is a minority of its clicks, but each of its" in notes and "kept as the ball's" in notes, notes
+    t = result.soundtrack.dataset.t
+    assert len(t) >= 4 and ratio_chain(t).restitution == pytest.approx(0.870, abs=0.01)
     forced = with_soundtrack(result, path, ball_spec("pingpong"), force=True)
     t = forced.soundtrack.dataset.t
     assert len(t) >= 4 and ratio_chain(t).restitution == pytest.approx(0.870, abs=0.01)

@@ -683,6 +683,19 @@ def with_soundtrack(result: ImportResult, path, spec, *, force: bool = False) ->
             imported, refused = err.result, err
         except InputError as err:
             notes.append(f"the clip's soundtrack gives no impacts ({err}): {_NOTHING}")
+        onsets = imported.accepted if imported is not None else det.onsets
+        agreement = None
+        if len(onsets):
+            impacts, frame = _video_impacts(result)
+            agreement = sound_agreement(onsets + audio.start, impacts, frame)
+        if refused is not None and _seen_by_the_picture(refused, agreement):
+            # The picture is an independent witness: a chain heard among other sounds is the
+            # ball's where every one of its onsets falls on one of the clip's impacts.
+            sound, refused = imported, None
+            notes.append(
+                f"the soundtrack's chain is a minority of its clicks, but each of its {len(onsets)} onsets falls on "
+                "one of the clip's impacts within a frame (see below): kept as the ball's"
+            )
         if imported is not None:
             notes.append(_sound_note(audio, det, imported, written=sound is not None))
         if refused is not None:
@@ -691,10 +704,8 @@ def with_soundtrack(result: ImportResult, path, spec, *, force: bool = False) ->
                 f"{_NOTHING}: the soundtrack's clicks are not one bouncing ball's (the audio's own gate): {problems} "
                 "(--force writes it anyway)"
             )
-        onsets = imported.accepted if imported is not None else det.onsets
-        if len(onsets):
-            impacts, frame = _video_impacts(result)
-            more_notes, more_warnings = sound_agreement(onsets + audio.start, impacts, frame).lines()
+        if agreement is not None:
+            more_notes, more_warnings = agreement.lines()
             notes += more_notes
             warnings += more_warnings
     return dataclasses.replace(
@@ -706,6 +717,28 @@ def with_soundtrack(result: ImportResult, path, spec, *, force: bool = False) ->
 
 
 _NOTHING = "no impacts file written"
+
+
+def _seen_by_the_picture(refused: ImplausibleRecording, agreement: SoundAgreement | None) -> bool:
+    """Whether the audio gate's only objection is that the chain is a minority of the clicks
+    (other sounds: voices, the phone's handling), and the picture confirms the chain: at
+    least `MIN_OFFSET_PAIRS` onsets, every one paired with an impact, within one frame as
+    recorded or after the one constant offset between the two clocks."""
+    minority_only = len(refused.problems) == 1 and "minority" in refused.problems[0]
+    if not minority_only or refused.result is None or agreement is None:
+        return False
+    n = len(agreement.onsets)
+    if n < MIN_OFFSET_PAIRS:
+        return False
+    if agreement.within_frame and len(agreement.pairs) == n:
+        return True
+    residual = agreement.residual
+    return (
+        agreement.offset is not None
+        and residual is not None
+        and len(residual) == n
+        and float(np.max(np.abs(residual))) <= agreement.frame
+    )
 
 
 def _sound_note(audio, det, imported: ImportResult, *, written: bool) -> str:
