@@ -392,7 +392,9 @@ def test_accelerator_section_on_an_accelerator_and_skipped_on_a_cpu(monkeypatch)
     lines = []
     assert _accelerator.accelerator_section(lines.append)["status"].startswith("skipped")
     monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
-    compiled = {"throughput": [{"method": "compiled loop, prange", "n": 8, "traj_per_s": 1.0, "wrong_rows": 0}]}
+    compiled = {
+        "throughput": [{"method": "compiled loop, prange", "n": 8, "traj_per_s": 1.0, "wrong_rows": 0}]
+    }
     out = _accelerator.accelerator_section(lines.append, ns=(4, 8), repeats=2, fit=False, compiled=compiled)
     assert out["status"] == "measured" and [r["n"] for r in out["sweep"]] == [4, 8]
     assert all(r["all_ok"] and r["traj_per_s"] > 0 for r in out["sweep"])
