@@ -338,3 +338,18 @@ def test_rk4_refuses_a_step_beyond_hunt_crossleys_limit():
     )
     assert int(status(5.0)) == jaxunilat.Status.INVALID_INPUT
     assert int(status(0.9 * limit)) == jaxunilat.Status.SUCCESS
+
+
+def test_a_solution_prints_in_one_line_without_the_failure_messages():
+    """`print(sol)`: shapes, the save times' span, the status in words and the step counts,
+    not the static list of failure messages `throw=True` would raise."""
+    sol = jaxunilat.simulate(jaxunilat.Ball.table1(2), (-0.4, -1 / 0.122), 0.1, samples=5)
+    text = repr(sol)
+    assert "\n" not in text and "max_steps" not in text and len(text) < 200, text
+    assert text.startswith("Solution(ts=f64[5] over [0, 0.1] s, ys={") and "status='success'" in text
+    failed = jaxunilat.simulate(
+        jaxunilat.Ball.table1(2), (-0.4, -1 / 0.122), 0.1, samples=5, max_steps=3, throw=False
+    )
+    assert "status='max_steps: jaxunilat.simulate: the solver used all max_steps = 3" in repr(failed).replace(
+        '"', "'"
+    )

@@ -126,6 +126,19 @@ class Solution(eqx.Module):
     def __getitem__(self, name: str) -> Array:
         return self.ys[name]
 
+    def __repr__(self) -> str:
+        """A short summary: shapes, the save times' span, the status in words (concrete
+        results) and the step counts; the static failure messages are not listed."""
+        ys = ", ".join(f"{name!r}: {_shape(value)}" for name, value in self.ys.items())
+        parts = [f"ts={_shape(self.ts)}{_span(self.ts)}", f"ys={{{ys}}}", f"y1={_shape(self.y1)}"]
+        concrete = not isinstance(self.status, jax.core.Tracer)
+        parts.append(f"status={self.message!r}" if concrete else f"status={_shape(self.status)}")
+        if concrete and np.size(self.num_steps) == 1:
+            parts.append(f"steps={int(self.num_steps)} ({int(self.num_rejected_steps)} rejected)")
+        if self.events is not None:
+            parts.append(f"events={_shape(self.events.t)}")
+        return f"Solution({', '.join(parts)})"
+
     @property
     def ok(self) -> bool:
         """True when every run in the (possibly batched) result succeeded."""
@@ -152,6 +165,22 @@ class Solution(eqx.Module):
             rows = int(np.sum((codes == code) & (reasons == reason)))
             parts.append(text + (f" ({rows} of {codes.size} rows)" if codes.size > 1 else ""))
         return "; ".join(parts)
+
+
+def _shape(value) -> str:
+    """`f64[5]`-style dtype and shape of an array (or a tracer)."""
+    dtype = jnp.dtype(value.dtype)
+    short = {"f": "f", "i": "i", "u": "u", "b": "bool"}.get(dtype.kind, dtype.kind)
+    name = short if short == "bool" else f"{short}{8 * dtype.itemsize}"
+    return f"{name}[{','.join(str(n) for n in np.shape(value))}]"
+
+
+def _span(ts) -> str:
+    """` over [t0, t1] s` of concrete save times; empty for traced or empty ones."""
+    if isinstance(ts, jax.core.Tracer) or np.size(ts) == 0:
+        return ""
+    t = np.asarray(ts)
+    return f" over [{t.min():.6g}, {t.max():.6g}] s"
 
 
 _FORWARD_ONLY = (
