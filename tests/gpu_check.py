@@ -12,7 +12,9 @@ On the bench's throughput scene (Table 1 example 2, event mode, Dopri8 pieces at
   at once (`batch_size=N`; the same program when the sizing takes them all), their results
   compared bit for bit, and (last, one warm run, skipped when the time is up) the former
   bench default, chunks of 1000 rows;
-- `sweep` at N = `--n-big` rows with the default sizing (all at once would ask for ~135 GiB).
+- `sweep` at N = `--n-big` rows with the default sizing (all at once would ask for ~135 GiB);
+- `outputs`: the N = `--n` rows with 2 save times instead of 2001, default sizing, and the
+  throughput ratio 2001 / 2 (what the outputs cost under `vmap`; the goal is >= 0.7).
 
 Each sweep row: rows a device vmaps at once, first call (compile, sizing and run) and warm
 medians [s], trajectories/s, the compiled program's bytes against the budget, and whether
@@ -47,6 +49,28 @@ def _parse(argv):
         "--budget-bytes", type=float, default=None, help="(testing) free memory per device, bytes"
     )
     return ap.parse_args(argv)
+
+
+#: The bench's trajectory with 2 save times (built on first use; a module-level object, so
+#: that `sweep` compiles it once).
+trajectory_two_samples = None
+
+
+def _two_samples(trajectory):
+    """`trajectory` (the bench's throughput row) with 2 save times instead of 2001."""
+    import functools
+
+    from jaxunilat._bench import _scale
+
+    @functools.wraps(trajectory)
+    def row(kappa, k_r):
+        saved, _scale.SAMPLES = _scale.SAMPLES, 2
+        try:
+            return trajectory(kappa, k_r)
+        finally:
+            _scale.SAMPLES = saved
+
+    return row
 
 
 def main(argv=None) -> int:
@@ -148,6 +172,28 @@ def main(argv=None) -> int:
             row["per_row_bytes"] = {"temp": per_row[0], "output": per_row[1], "argument": per_row[2]}
             row["all_at_once_bytes"] = fixed + args.n_big * sum(per_row)
         rows.append(row)
+    # The outputs' cost under vmap: the same rows with 2 save times instead of 2001.
+    global trajectory_two_samples
+    if trajectory_two_samples is None:
+        trajectory_two_samples = _two_samples(trajectory)
+    kappa, k_r = pairs(args.n)
+    jax.block_until_ready(sweep(trajectory_two_samples, kappa, k_r))
+    walls = []
+    for _ in range(args.repeats):
+        start = time.perf_counter()
+        jax.block_until_ready(sweep(trajectory_two_samples, kappa, k_r))
+        walls.append(time.perf_counter() - start)
+    two = args.n / statistics.median(walls)
+    out["outputs"] = {
+        "n": args.n,
+        "traj_per_s_2_save_times": two,
+        "traj_per_s_2001_save_times": rows[0]["traj_per_s"],
+        "ratio_2001_vs_2": rows[0]["traj_per_s"] / two,
+    }
+    print(
+        f"outputs: 2 save times {two:.0f} traj/s, ratio 2001/2 {out['outputs']['ratio_2001_vs_2']:.2f}",
+        file=sys.stderr,
+    )
     label = "chunks of 1000 (the former bench default)"
     if args.n <= 1000:
         rows.append({"label": label, "skipped": f"N = {args.n}: one chunk"})
