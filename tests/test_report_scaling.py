@@ -128,10 +128,10 @@ def _section(report: str, name: str) -> list[str]:
 def test_report_names_the_file_for_per_file_values(results, n):
     result = results[n]
     report = result.report()
-    variables = _section(report, "Variables")
-    # No bare per-file value in [[Variables]]: it points to the per-file table instead.
-    assert not any(re.match(r"\s+(x0|v0|offset)\s*=", line) for line in variables)
-    assert any("offset fitted per file" in line and "[[Files]]" in line for line in variables)
+    nuisance = _section(report, "Nuisance parameters")
+    # No bare per-file value among the nuisance parameters: they point to the per-file table.
+    assert not any(re.match(r"\s+(x0|v0|offset)\s*=", line) for line in nuisance)
+    assert any("offset fitted per file" in line and "[[Files]]" in line for line in nuisance)
     table = _section(report, "Files")
     assert "offset (ms)" in table[1] and "e alone" in table[1]
     for f in result.file_table():
@@ -141,9 +141,9 @@ def test_report_names_the_file_for_per_file_values(results, n):
 
 
 def test_one_file_report_keeps_its_variables(one):
-    variables = _section(one.report(), "Variables")
-    assert any(re.match(r"\s+offset\s*=", line) for line in variables)
-    assert "(shared by every file)" not in variables[0]
+    nuisance = _section(one.report(), "Nuisance parameters")
+    assert any(re.match(r"\s+offset\s*=", line) for line in nuisance)
+    assert "(shared by every file)" not in nuisance[0]
 
 
 @pytest.mark.parametrize("n", [1, 2, 30])
@@ -177,9 +177,10 @@ def test_unidentifiable_parameters_print_what_the_data_bound(one):
     )
     report = result.report()
     assert _absurd_numbers(report) == []
-    kappa_line = next(line for line in _section(report, "Variables") if line.strip().startswith("kappa"))
-    assert "not bounded by the data" in kappa_line
-    assert "t_c < 3 ms" in report
+    kappa_line = next(line for line in _section(report, "Results") if line.strip().startswith("kappa"))
+    assert "not bounded by the data" in kappa_line and "identifiable: NO" in kappa_line
+    t_c_line = next(line for line in _section(report, "Results") if line.strip().startswith("t_c"))
+    assert "t_c < 3 ms" in t_c_line and "identifiable: NO" in t_c_line
     doc = json.loads(json.dumps(result.to_json_dict(), allow_nan=False))
     assert doc["parameters"]["kappa"]["ci95"] == [1.9e-130, 3.8e138]  # the numbers stay
     assert doc["bounds"]["kappa"]["kind"] == "none" and doc["bounds"]["kappa"]["lower"] is None

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+from decimal import ROUND_HALF_UP, Decimal
 from typing import Any
 
 import jax.numpy as jnp
@@ -13,6 +14,7 @@ import numpy as np
 import jaxunilat as ju
 
 from .._fit._problem import LOG_PARAMETERS, NEUTRAL, PARAMETERS, TRACE_ONLY, applies, from_z, units
+from .._fit._uncertainty import P_INCONSISTENT
 
 #: Each file's own entries (the joint layout's local ones), their SI unit, and how the
 #: [[Files]] table shows them (scale from SI, unit).
@@ -29,6 +31,8 @@ _LOCAL_NAMES = tuple(name for name, *_ in _LOCAL)
 SPAN_DECADES = 3.0
 #: An interval end beyond 1e±30 (SI units) is a number, not a bound.
 ABSURD = 1e30
+#: The report lists the correlations of at least this size (the JSON has them all).
+SHOWN_CORRELATION = 0.1
 #: Contact times outside this window (s) are no physical bound on a ball's contact.
 CONTACT_TIME_WINDOW = (1e-6, 1.0)
 #: How `bound` shows each quantity: (symbol, scale from SI, unit); None: the law's unit.
@@ -210,7 +214,7 @@ class FitResult:
             hints.append("or fit the start with --fit x0,v0")
         return (
             f"WARNING: the model does not fit the data within the stated noise: reduced chi-square "
-            f"{g['reduced_chi2']:.4g} (p = {g['p_value']:.2g}).\nThe intervals above use the residual "
+            f"{g['reduced_chi2']:.4g} (p = {g['p_value']:.2g} < {P_INCONSISTENT:g}).\nThe intervals above use the residual "
             "scatter instead; that is honest only if the excess is scatter (bounce-to-bounce variation) "
             "and not a wrong model.\nTo check: " + "; ".join(hints) + "."
         )
@@ -394,20 +398,26 @@ class FitResult:
         return [{"x0": float(d.x0), "v0": float(d.v0), "offset": 0.0, **NEUTRAL} for d in datasets]
 
     def report(self) -> str:
-        """A plain-text report in the style of lmfit's `fit_report`."""
+        """A plain-text report for people, most wanted first: the data, the results (e,
+        t_c, κ, k_r with their identifiability), the nuisance parameters, the statistics,
+        the per-file table and notes; how the fit ran comes last, under [[Diagnostics]]."""
         sections = (
             self._report_data,
+            self._report_results,
+            self._report_nuisance,
             self._report_statistics,
-            self._report_variables,
-            self._report_identifiability,
+            self._report_correlations,
+            self._report_profile,
             self._report_rows,
             self._report_laws,
             self._report_holdout,
             self._report_notes,
+            self._report_diagnostics,
         )
         return "\n".join(line for section in sections for line in section())
 
     def _report_data(self) -> list[str]:
+        """[[Data]]: the files, what they observe, their rows, the mass and gravity."""
         d = self.data
         lines = ["[[Data]]"]
         files = [e["data"] or "(in memory)" for e in self.datasets] or [d.path or "(in memory)"]
@@ -416,98 +426,119 @@ class FitResult:
         lines.append(f"    scene, observe     = {d.scene}, {d.observe}")
         lines.append(f"    data points        = {len(self.residuals)}" + self._used_text())
         lines.append(f"    mass               = {d.mass:g} kg")
+        gravity = list(dict.fromkeys(float(f.gravity) for f in self.datasets_data or [d]))
+        each = " (per file)" if len(gravity) > 1 else ""
+        lines.append(f"    gravity g          = {', '.join(f'{g:g}' for g in gravity)} m/s^2{each}")
         return lines
 
     def _used_text(self) -> str:
+        """` (N fitted)` where outliers or held-out rows were left out of the fit."""
         if self.used is None or self.used.all():
             return ""
         return f" ({int(self.used.sum())} fitted)"
 
-    def _report_statistics(self) -> list[str]:
-        lines = ["[[Fit Statistics]]"]
-        lines.append(f"    law                = {self.law} ({self.law_choice})")
-        lines.append(f"    method             = {self.method} (event mode, exact contact)")
-        lines.append(
-            f"    start              = e = {self.initial['restitution']:.4f} from {self.initial['source']}"
-        )
-        lines.append(
-            f"                         t_c = {self.initial['contact_time'] * 1e3:.3g} ms (prior 0.5-2 ms)"
-        )
-        lines.append(
-            f"    starts             = {len(self.starts)}, chi-square of each on the first window: "
-            + _costs(self.starts)
-        )
-        lines.append(
-            "                         (rows in the first 35% of each file's span, plus the t_c prior row where used;"
-            " not comparable with the final chi-square below)"
-        )
-        lines.append(f"    LM iterations      = {self.iterations}")
-        lines.append(
-            f"    function evals     = {self.simulations} (each one compiled batch of event-mode runs)"
-        )
-        n_used = int(len(self.residuals) if self.used is None else self.used.sum())
-        rows = (
-            "log ratios of successive flights"
-            if self.sigma_source == "restitution scatter"
-            else "fitted data rows"
-        )
-        lines.append(f"    chi-square         = {self.chi2:.6g} (final point, over the {n_used} {rows})")
-        lines.append(f"    reduced chi-square = {self.goodness['reduced_chi2']:.6g}")
-        unit = "s" if self.data.observe == "impacts" else "m"
-        if self.sigma_source == "restitution scatter":
-            lines.append(f"    noise sigma        = {self.sigma:.3%} of e per bounce (restitution scatter)")
-        else:
-            lines.append(f"    noise sigma        = {self.sigma:.4g} {unit} ({self.sigma_source})")
-        if self.noise is not None:
-            lines.append(f"    noise              = {self.noise['text']}")
-        g = self.goodness
-        if g["p_value"] is None:
-            lines.append("    fit vs noise       = not tested (sigma estimated from the residuals)")
-        elif self.noise is not None and self.noise.get("verdict") == "overstated":
-            lines.append(
-                f"    fit vs noise       = OVERSTATED noise: chi-square far below its expectation "
-                f"(P(chi2_{g['dof']} <= chi-square) = {1.0 - g['p_value']:.3g})"
-            )
-        else:
-            verdict = "consistent" if g["consistent"] else "INCONSISTENT"
-            lines.append(
-                f"    fit vs noise       = {verdict} (P(chi2_{g['dof']} >= chi-square) = {g['p_value']:.3g})"
-            )
-        lines.append(f"    converged          = {self.converged} ({self.message})")
-        lines.append(
-            f"    wall time          = {self.wall_s:.2f} s (including JIT compilation, or loading it from the cache)"
-        )
+    def _report_results(self) -> list[str]:
+        """[[Results]]: e, t_c, κ and k_r, each with its identifiability verdict beside it."""
+        u = units(self.law)
+        where = "" if self.law == "kelvin-voigt" else "; e and t_c at the data's typical impact speed"
+        lines = [
+            f"[[Results]] ({self.law}{where}; identifiable: 95% CI finite and half-width <= "
+            f"{self.rel_halfwidth:.0%} of the value)"
+            + ("" if self.converged else " (NOT CONVERGED: the values are not estimates)")
+        ]
+        rows = []
+        for name, label, scale, unit in (
+            ("restitution", "e", 1.0, ""),
+            ("contact_time", "t_c", 1e3, "ms"),
+            ("kappa", "kappa", 1.0, u["kappa"]),
+            ("k_r", "k_r", 1.0, u["k_r"]),
+        ):
+            entry = self.derived.get(name) or self.parameters[name]
+            if name in ("kappa", "k_r") and name not in self.free:
+                columns, says = [f"{label:<7}= {entry['value']:.6g} (fixed) {unit}"], "held, not fitted"
+            else:
+                b = self._bound(name)
+                columns = _entry_columns(label, entry, unit, self.converged, b, scale)
+                says = _halfwidth(entry) if b["kind"] == "interval" else ""
+            says = self.withheld.get(name, says if self.converged else "the fit did not converge")
+            verdict = "yes" if self.identifiable[name] else "NO"
+            rows.append([*columns, f" identifiable: {verdict}" + (f" ({says})" if says else "")])
+        lines += _aligned(rows)
+        if self.goodness["consistent"] is False:
+            lines.extend("    " + line for line in self.inconsistency_warning().splitlines())
         return lines
 
-    def _report_variables(self) -> list[str]:
+    def _report_nuisance(self) -> list[str]:
+        """[[Nuisance parameters]]: drag, the release state, clock offset and a trace's
+        calibration, fitted or held (a several-file fit points to [[Files]])."""
         d, unit = self.data, units(self.law)
         several = len(self.datasets_data or [d]) > 1
         lines = [
-            "[[Variables]]"
+            "[[Nuisance parameters]]"
             + ("" if self.converged else " (NOT CONVERGED: the values are not estimates)")
             + (" (shared by every file)" if several else "")
         ]
-        per_file = []
-        for name in PARAMETERS:
+        per_file, rows = [], []
+        for name in PARAMETERS[2:]:
             entry = self.parameters[name]
             if several and name in _LOCAL_NAMES:
                 if name not in TRACE_ONLY or any(f.observe == "trace" for f in self.datasets_data):
                     per_file.append(name)
                 continue
             if name not in self.free:
-                held = name in ("kappa", "k_r", "x0", "v0") or (name in TRACE_ONLY and d.observe == "trace")
+                held = name in ("x0", "v0") or (name in TRACE_ONLY and d.observe == "trace")
                 if held or (name == "drag" and d.drag > 0):
-                    lines.append(f"    {name:<7}= {entry['value']:<12.6g} (fixed)  {unit[name]}")
+                    shown = f" {unit[name]}" if unit[name] else ""
+                    rows.append([f"{name:<7}= {entry['value']:.6g} (fixed){shown}"])
                 continue
-            lines.append("    " + _format_entry(name, entry, unit[name], self.converged, self._bound(name)))
+            rows.append(_entry_columns(name, entry, unit[name], self.converged, self._bound(name)))
+        lines += _aligned(rows)
         if several:
             lines.append(self._per_file_line(per_file))
-        where = "" if self.law == "kelvin-voigt" else " at the data's typical impact speed"
-        lines.append(f"[[Derived]] ({self.law}{where})")
-        for name, label, u in (("restitution", "e", ""), ("contact_time", "t_c", "s")):
-            entry = self.derived[name]
-            lines.append("    " + _format_entry(label, entry, u, self.converged, self._bound(name)))
         return lines
+
+    def _report_statistics(self) -> list[str]:
+        """[[Fit Statistics]]: the law, χ² over the fitted rows, the noise and its test."""
+        lines = ["[[Fit Statistics]]"]
+        lines.append(f"    law                = {self.law} ({self.law_choice})")
+        n_used = int(len(self.residuals) if self.used is None else self.used.sum())
+        rows = (
+            "log ratios of successive flights"
+            if self.sigma_source == "restitution scatter"
+            else "fitted data rows"
+        )
+        lines.append(f"    chi-square         = {self.chi2:.6g} (over the {n_used} {rows})")
+        reduced = self.goodness["reduced_chi2"]
+        lines.append(
+            f"    reduced chi-square = {reduced:.4g}"
+            if abs(reduced) < 1e4
+            else f"    reduced chi-square = {reduced:.0f}"
+        )
+        unit = "s" if self.data.observe == "impacts" else "m"
+        if self.sigma_source == "restitution scatter":
+            lines.append(f"    noise sigma        = {self.sigma:.2%} of e per bounce (restitution scatter)")
+        else:
+            lines.append(f"    noise sigma        = {self.sigma:.4g} {unit} ({self.sigma_source})")
+        if self.noise is not None:
+            lines.append(f"    noise              = {self.noise['text']}")
+        lines.append(f"    fit vs noise       = {self._noise_test()}")
+        lines.append(f"    converged          = {self.converged} ({self.message})")
+        return lines
+
+    def _noise_test(self) -> str:
+        """The χ² test of the fit against the stated noise, with the threshold it used."""
+        g = self.goodness
+        if g["p_value"] is None:
+            return "not tested (sigma estimated from the residuals)"
+        dof, p = g["dof"], g["p_value"]
+        if self.noise is not None and self.noise.get("verdict") == "overstated":
+            return (
+                f"OVERSTATED noise: chi-square far below its expectation "
+                f"(P(chi2_{dof} <= chi-square) = {1.0 - p:.2g}, below the threshold {P_INCONSISTENT:g})"
+            )
+        if g["consistent"]:
+            return f"consistent (P(chi2_{dof} >= chi-square) = {p:.2g}, at or above the threshold {P_INCONSISTENT:g})"
+        return f"INCONSISTENT (P(chi2_{dof} >= chi-square) = {p:.2g}, below the threshold {P_INCONSISTENT:g})"
 
     def _bound(self, name: str) -> dict | None:
         """`bound` of κ, k_r, drag, e and t_c (None for the release state and offset)."""
@@ -535,52 +566,64 @@ class FitResult:
                 parts.append(f"{n} fixed per file (in [[Files]])")
         return "    per file: " + "; ".join(parts)
 
-    def _report_identifiability(self) -> list[str]:
+    def _report_correlations(self) -> list[str]:
+        """[[Correlations]] of the fitted entries, those with |C| >= `SHOWN_CORRELATION`."""
         lines = [
-            f"[[Identifiability]] (95% CI finite and half-width <= {self.rel_halfwidth:.0%} of the value)"
+            f"[[Correlations]] (|C| >= {SHOWN_CORRELATION:g}; of the fitted entries, logs for kappa, k_r, drag)"
         ]
-        if self.goodness["consistent"] is False:
-            lines.extend("    " + line for line in self.inconsistency_warning().splitlines())
-        for name, label in (
-            ("kappa", "kappa"),
-            ("k_r", "k_r"),
-            ("restitution", "e"),
-            ("contact_time", "t_c"),
-        ):
-            entry = self.parameters.get(name) or self.derived.get(name)
-            b = self._bound(name)
-            says = _halfwidth(entry) if b["kind"] == "interval" else f"  ({b['text']})"
-            if name in self.withheld:
-                says = f"  ({self.withheld[name]})"
-            lines.append(f"    {label:<7}: {'yes' if self.identifiable[name] else 'NO':<4}" + says)
-        lines.append("[[Correlations]] (of the fitted entries; logs for kappa, k_r, drag)")
         names, corr = self.free, np.asarray(self.correlation)
         for i in range(len(names)):
             for j in range(i + 1, len(names)):
-                lines.append(f"    C({names[i]}, {names[j]}) = {corr[i, j]:+.6f}")
-        if self.profile is not None:
-            lo, hi = self.profile["ci95"]
-            b = bound("kappa", {"value": self.kappa, "ci95": [lo, hi]}, units(self.law)["kappa"])
-            lines.append("[[Profile likelihood]]")
-            u = units(self.law)["kappa"]
-            if b["kind"] == "interval":
-                lines.append(f"    kappa 95% CI (delta chi2 <= 3.84): [{lo:.6g}, {hi:.6g}] {u}")
-            else:
-                lines.append(
-                    f"    kappa 95% CI (delta chi2 <= 3.84): lower end {_profile_end(lo, u, 'lower')}, "
-                    f"upper end {_profile_end(hi, u, 'upper')}"
-                )
-            below = self.profile.get("below_fit")
-            if below is not None and below > 0:
-                lines.append(
-                    f"    the profile reached a chi-square {below:.3g} below the fit's own"
-                    + (": the fit is not at its minimum" if not self.converged else " (within the tolerance)")
-                )
-            if self.profile.get("failed"):
-                lines.append(
-                    f"    grid points whose re-fit failed (not excluded): {len(self.profile['failed'])}"
-                )
+                c = float(corr[i, j])
+                if not math.isfinite(c):
+                    lines.append(f"    C({names[i]}, {names[j]}) = undefined (a variance is 0 or infinite)")
+                elif abs(c) >= SHOWN_CORRELATION:
+                    lines.append(f"    C({names[i]}, {names[j]}) = {c:+.2f}")
+        if len(lines) == 1:
+            lines.append(f"    none (every |C| < {SHOWN_CORRELATION:g})")
         return lines
+
+    def _report_profile(self) -> list[str]:
+        """[[Profile likelihood]] of κ, where it was computed."""
+        if self.profile is None:
+            return []
+        lo, hi = self.profile["ci95"]
+        u = units(self.law)["kappa"]
+        b = bound("kappa", {"value": self.kappa, "ci95": [lo, hi]}, u)
+        lines = ["[[Profile likelihood]]"]
+        if b["kind"] == "interval":
+            place = rounded(self.kappa, self.parameters["kappa"]["stderr"])[1]
+            lines.append(f"    kappa 95% CI (delta chi2 <= 3.84): [{_at(lo, place)}, {_at(hi, place)}] {u}")
+        else:
+            lines.append(
+                f"    kappa 95% CI (delta chi2 <= 3.84): lower end {_profile_end(lo, u, 'lower')}, "
+                f"upper end {_profile_end(hi, u, 'upper')}"
+            )
+        below = self.profile.get("below_fit")
+        if below is not None and below > 0:
+            lines.append(
+                f"    the profile reached a chi-square {below:.3g} below the fit's own"
+                + (": the fit is not at its minimum" if not self.converged else " (within the tolerance)")
+            )
+        if self.profile.get("failed"):
+            lines.append(f"    grid points whose re-fit failed (not excluded): {len(self.profile['failed'])}")
+        return lines
+
+    def _report_diagnostics(self) -> list[str]:
+        """[[Diagnostics]]: how the fit ran (start, starts, iterations, evaluations, time)."""
+        steps = f", {self.gradient_steps} optax steps" if self.gradient_steps else ""
+        unconverged = " (* not converged)" if any(not s["converged"] for s in self.starts) else ""
+        return [
+            "[[Diagnostics]] (how the fit ran)",
+            f"    method    = {self.method} (event mode, exact contact): {self.iterations} LM iterations{steps}, "
+            f"{self.simulations} function evals (each one compiled batch of event-mode runs)",
+            f"    start     = e = {self.initial['restitution']:.4f} from {self.initial['source']}, "
+            f"t_c = {self.initial['contact_time'] * 1e3:.3g} ms (prior 0.5-2 ms)",
+            f"    starts    = {len(self.starts)}, chi-square of each on the first window: {_costs(self.starts)}"
+            f"{unconverged} (rows in the first 35% of each file's span, plus the t_c prior row where used; "
+            "not comparable with the final chi-square)",
+            f"    wall time = {self.wall_s:.2f} s (including JIT compilation, or loading it from the cache)",
+        ]
 
     def _report_rows(self) -> list[str]:
         """Per file: rows used, held out, outliers, residual rms, its x0/v0/offset and own e."""
@@ -634,6 +677,7 @@ class FitResult:
         return lines
 
     def _report_laws(self) -> list[str]:
+        """[[Contact laws]]: each law's chi-square, AIC, BIC and e (with `law="auto"`)."""
         if not self.laws or len(self.laws) < 2:
             return []
         lines = ["[[Contact laws]] (same rows; lower is better)"]
@@ -646,9 +690,11 @@ class FitResult:
         return lines
 
     def _report_notes(self) -> list[str]:
+        """[[Notes]]: what the fit and the data's checks want the reader to know."""
         return ["[[Notes]]", *(f"    {note}" for note in self.notes)] if self.notes else []
 
     def _report_holdout(self) -> list[str]:
+        """[[Hold-out]]: the held-out rows' prediction errors against the noise."""
         h = self.holdout
         if h is None:
             return []
@@ -677,6 +723,7 @@ def _profile_end(value: float, unit: str, side: str) -> str:
 
 
 def _finite_or_none(value):
+    """A float, or None where it is not finite (JSON has no inf or NaN)."""
     value = float(value)
     return value if math.isfinite(value) else None
 
@@ -697,32 +744,144 @@ def _clean_json(value):
 
 
 def _costs(starts) -> str:
+    """Each start's chi-square on the first window (* where it did not converge)."""
     return ", ".join(f"{2 * s['cost']:.4g}" + ("" if s["converged"] else "*") for s in starts)
 
 
-def _format_entry(name: str, entry: dict, unit: str, converged: bool = True, b: dict | None = None) -> str:
-    """One [[Variables]] line; `b` (from `bound`) replaces an unbounded or absurd interval."""
-    value, stderr = entry["value"], entry["stderr"]
+def _entry_columns(
+    name: str, entry: dict, unit: str, converged: bool = True, b: dict | None = None, scale: float = 1.0
+) -> list[str]:
+    """The columns of one parameter line: `name = value +/- stderr unit`, `(relative)` and
+    `95% CI [lo, hi] unit`, every number rounded to the stderr's two significant digits
+    (`rounded`), all × `scale`; `b` (from `bound`) replaces an unbounded or absurd interval
+    by what the data bound. One column where the fit did not converge."""
+    value, stderr = entry["value"] * scale, entry["stderr"] * scale
+    shown = f" {unit}" if unit else ""
     if not converged:
-        return f"{name:<7}= {value:<12.6g} (no interval: the fit did not converge) {unit}"
-    lo, hi = entry["ci95"]
+        return [f"{name:<7}= {value:.6g}{shown} (no interval: the fit did not converge)"]
+    text, place = rounded(value, stderr)
     rel = f"({_percent(stderr / abs(value))})" if math.isfinite(stderr) and value else "(inf)"
-    head = f"{name:<7}= {value:<12.6g} +/- {stderr:<10.4g} {rel:<9}"
+    head = f"{name:<7}= {text}{shown}"
     if b is not None and b["kind"] != "interval":
-        return f"{head} {unit}; {b['text']}"
-    return f"{head} 95% CI [{lo:.6g}, {hi:.6g}] {unit}"
+        return [head, rel + ";", b["text"]]
+    lo, hi = (end * scale for end in entry["ci95"])
+    return [head, rel, f"95% CI [{_at(lo, place)}, {_at(hi, place)}]{shown}"]
+
+
+def _aligned(rows: list[list[str]], gap: str = "  ") -> list[str]:
+    """Rows of columns as indented lines, each column but a row's last padded to the
+    widest entry of that column."""
+    widths: dict[int, int] = {}
+    for row in rows:
+        for i, cell in enumerate(row[:-1]):
+            widths[i] = max(widths.get(i, 0), len(cell))
+    return [
+        "    " + gap.join([f"{c:<{widths[i]}}" for i, c in enumerate(row[:-1])] + row[-1:]) for row in rows
+    ]
 
 
 def _halfwidth(entry) -> str:
+    """The 95% half-width of an entry relative to its value, in words."""
     lo, hi = entry["ci95"]
     if not (math.isfinite(lo) and math.isfinite(hi)):
-        return "  (95% CI unbounded)"
-    return f"  (95% half-width {_percent((hi - lo) / 2 / abs(entry['value']))})"
+        return "95% CI unbounded"
+    return f"95% half-width {_percent((hi - lo) / 2 / abs(entry['value']))}"
 
 
 def _percent(fraction: float) -> str:
-    """A relative width as a percentage, or '> 1000%' for an unbounded one."""
-    return f"{fraction:.2%}" if fraction <= 10.0 else "> 1000%"
+    """A relative width as a percentage to two significant digits (`0.0079%`, `1.6%`,
+    `97%`), or '> 1000%' for an unbounded one."""
+    if not math.isfinite(fraction) or fraction > 10.0:
+        return "> 1000%"
+    return f"{_two(fraction * 100)}%" if fraction > 0 else "0%"
+
+
+#: Fixed notation for numbers below this magnitude rounded to at most this many decimals;
+#: scientific notation beyond.
+MAX_FIXED, MAX_DECIMALS = 1e7, 8
+#: The most significant digits a rounded value shows (a relative uncertainty below 1e-12
+#: is shown as 12 digits of the value).
+MAX_DIGITS = 12
+
+
+def _round_at(x: float, place: int) -> Decimal:
+    """x rounded half away from zero to a multiple of 10**place (of its shortest decimal
+    form, so 2.675 rounds to 2.68 as written, not as stored in binary)."""
+    out = Decimal(repr(float(x))).quantize(Decimal(1).scaleb(place), rounding=ROUND_HALF_UP)
+    return abs(out) if out == 0 else out
+
+
+def _second_digit(x: float) -> int:
+    """The decimal place (power of ten) of x's second significant digit once x is rounded
+    to two (99.7 rounds to 100, whose second digit is the tens)."""
+    place = math.floor(math.log10(abs(x))) - 1
+    if abs(_round_at(x, place)) >= Decimal(100).scaleb(place):
+        place += 1
+    return place
+
+
+def _fixed_at(x: float, place: int) -> str | None:
+    """x rounded to 10**place in fixed notation; None where that would run long."""
+    if -place > MAX_DECIMALS or abs(x) >= MAX_FIXED:
+        return None
+    return f"{_round_at(x, place):f}"
+
+
+def _sci_at(x: float, place: int) -> str:
+    """x rounded to 10**place in scientific notation (at most `MAX_DIGITS` digits)."""
+    if x == 0:
+        return "0"
+    digits = min(max(math.floor(math.log10(abs(x))) - place, 0), MAX_DIGITS - 1)
+    return f"{x:.{digits}e}"
+
+
+def _at(x: float, place: int | None) -> str:
+    """x rounded to 10**place (fixed notation where short, else scientific); 6
+    significant digits where `place` is None; `inf`/`nan` as such."""
+    if place is None or not math.isfinite(x):
+        return f"{x:.6g}"
+    return _fixed_at(x, place) or _sci_at(x, place)
+
+
+def _two(x: float) -> str:
+    """x to two significant digits (fixed notation where short, else scientific)."""
+    if x == 0 or not math.isfinite(x):
+        return f"{x:g}"
+    return _at(x, _second_digit(x))
+
+
+def rounded(value: float, stderr: float | None) -> tuple[str, int | None]:
+    """`value +/- stderr` for people, and the decimal place the value was rounded at.
+
+    The stderr is rounded to two significant digits and the value to the same decimal
+    place (27097.8 ± 434.4 → `27100 +/- 430`; 0.935008 ± 7.426e-06 → `0.9350080 +/-
+    0.0000074`); numbers of 1e7 or more, or rounded past `MAX_DECIMALS` decimals, share one
+    exponent (`(1.000 +/- 0.020)e+08`). A stderr of None is a held value: 6 significant
+    digits and `(fixed)`; a stderr of 0 shows the value alone, an infinite one `+/- inf`.
+    Where the stderr is so much larger than the value that rounding would print 0 for a
+    value that is not, each keeps two significant digits of its own (`450000 +/- 5.0e+07`).
+    The place is None where the value was shown to 6 (or `MAX_DIGITS`) significant digits.
+    """
+    if stderr is None:
+        return f"{value:.6g} (fixed)", None
+    if not (math.isfinite(value) and math.isfinite(stderr)):
+        return f"{value:.6g} +/- {stderr:.2g}", None
+    if stderr <= 0:
+        return f"{value:.6g}", None
+    place = _second_digit(stderr)
+    if value != 0 and abs(value) < 5.0 * 10.0 ** (place - 1):
+        return f"{_two(value)} +/- {_two(stderr)}", place
+    v, s = _fixed_at(value, place), _fixed_at(stderr, place)
+    if v is not None and s is not None:
+        return f"{v} +/- {s}", place
+    lead = math.floor(math.log10(max(abs(value), stderr)))
+    if lead - place >= MAX_DIGITS:
+        return f"{value:.{MAX_DIGITS}g} +/- {stderr:.2g}", None
+    unit = 10.0**lead
+    return (
+        f"({_round_at(value / unit, place - lead):f} +/- {_round_at(stderr / unit, place - lead):f})e{lead:+03d}",
+        place,
+    )
 
 
 def bound(name: str, entry: dict, unit: str | None = None) -> dict:
@@ -814,17 +973,9 @@ def residual_unit(observe: str) -> tuple[float, str]:
 
 
 def _pm(value: float, stderr: float | None, scale: float) -> str:
-    """value +/- stderr, both × scale, to two significant digits of the stderr."""
-    v = value * scale
-    if stderr is None:
-        return f"{v:.6g} (fixed)"
-    if not math.isfinite(stderr):
-        return f"{v:.6g} +/- inf"
-    s = stderr * scale
-    if s <= 0:
-        return f"{v:.6g}"
-    digits = min(max(1 - math.floor(math.log10(s)), 0), 9)
-    return f"{v:.{digits}f} +/- {s:.{digits}f}"
+    """value +/- stderr, both × scale, rounded to two significant digits of the stderr
+    (`rounded`)."""
+    return rounded(value * scale, None if stderr is None else stderr * scale)[0]
 
 
 def _file_name(path: str | None, f: int) -> str:
