@@ -31,6 +31,51 @@ class Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
+#: The global flags (`--version` aside): `(flag, help)`. Each is accepted before the
+#: command and after it, at every level (`jaxunilat --no-cache identify` and
+#: `jaxunilat identify --no-cache` are the same run).
+GLOBAL_FLAGS = (
+    ("--no-cache", "do not use the persistent caches (compiled programs) for this run"),
+    ("--debug", "on an internal error, print the full traceback"),
+)
+
+
+def add_global_flags(parser: argparse.ArgumentParser, version: str) -> None:
+    """Add the global flags to `parser`, the command line's own parser (where they default
+    to False).
+
+    `--version` prints `version` and exits."""
+    parser.add_argument("--version", action="version", version=version)
+    for flag, text in GLOBAL_FLAGS:
+        parser.add_argument(flag, action="store_true", help=text)
+
+
+def repeat_global_flags(parser: argparse.ArgumentParser, version: str) -> None:
+    """Accept the global flags also after a command: add them to the command's `parser`
+    and to every parser below it (`simulate ball`), as a group of its `--help`.
+
+    There they set nothing unless given (`argparse.SUPPRESS`), so that a flag given
+    before the command is not reset by the command's default. A flag that a command
+    defines itself keeps the command's meaning; `--version` is accepted but not listed."""
+    seen: set[int] = set()
+    todo = [parser]
+    while todo:
+        current = todo.pop()
+        if id(current) in seen:  # a command reachable under aliases
+            continue
+        seen.add(id(current))
+        taken = current._option_string_actions
+        group = current.add_argument_group("global options (also accepted before the command)")
+        for flag, text in GLOBAL_FLAGS:
+            if flag not in taken:
+                group.add_argument(flag, action="store_true", default=argparse.SUPPRESS, help=text)
+        if "--version" not in taken:
+            current.add_argument("--version", action="version", version=version, help=argparse.SUPPRESS)
+        for action in current._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                todo.extend(action.choices.values())
+
+
 def count(text: str) -> int:
     """An argparse type for counts: an integer, also spelled like `1e4` (integral only)."""
     try:

@@ -1,6 +1,9 @@
 """The `jaxunilat` command line: the shell that builds the parser and maps errors to exit codes.
 
-    jaxunilat [--no-cache] [--debug] COMMAND ...
+    jaxunilat [--no-cache] [--debug] COMMAND ... [--no-cache] [--debug]
+
+The global flags (`_args.GLOBAL_FLAGS`) mean the same before the command and after it,
+at any level (`jaxunilat simulate ball --no-cache`); `--version` too.
 
 Exit codes: 0 success; 1 a run-time failure (the solver diverged or ran out of steps,
 a file or the standard output could not be written) or an internal error (a bug); 2 bad
@@ -16,10 +19,15 @@ Commands: jaxunilat's own are listed in `_COMMANDS`, each `(name, module)` whose
 has `add_<name>(subparsers)`, imported only when the parser is built. Other packages
 (identify) add theirs through the `jaxunilat.commands` entry points
 (`jaxunilat.internal._cli` documents the protocol); jaxunilat never imports them by name.
+The command line imports such a command only when it names it: `jaxunilat --help` lists
+it with the help line that its `register` passes as a string literal (read from the
+source, `written_summary`), so that `--help`, `--version` and `jaxunilat simulate ...`
+import no other package.
 """
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import errno
 import logging
@@ -41,7 +49,7 @@ from ..internal._errors import (
 )
 from ..internal._placement import on_host
 from ..internal._text import bounded_numbers, printable
-from ._args import Parser, cli_spelling, command_flags
+from ._args import Parser, add_global_flags, cli_spelling, command_flags, repeat_global_flags
 
 #: jaxunilat's own commands: (name, module holding `add_<name>(subparsers)`).
 _COMMANDS = (
@@ -67,27 +75,87 @@ def _own_command(module: str, name: str):
     return add
 
 
+def _plugin_points() -> dict:
+    """The entry points of the `jaxunilat.commands` group, by command name (none loaded)."""
+    from importlib.metadata import entry_points
+
+    return {point.name: point for point in entry_points(group=COMMANDS_GROUP)}
+
+
+def _loaded(point):
+    """The `register` of entry point `point`; None when its package is not installed."""
+    try:
+        return point.load()
+    except ModuleNotFoundError as err:
+        top = point.value.split(":")[0].split(".")[0].strip()
+        if err.name is None or err.name.split(".")[0] != top:
+            raise  # the package is there but one of its imports is not: a bug to report
+        return None
+
+
 def plugin_commands() -> dict:
     """The commands other packages register in the `jaxunilat.commands` entry-point group:
     `{name: register}`. One whose package is not installed is left out."""
-    from importlib.metadata import entry_points
-
-    found = {}
-    for point in entry_points(group=COMMANDS_GROUP):
-        try:
-            found[point.name] = point.load()
-        except ModuleNotFoundError as err:
-            top = point.value.split(":")[0].split(".")[0]
-            if err.name is None or err.name.split(".")[0] != top:
-                raise  # the package is there but one of its imports is not: a bug to report
-    return found
+    found = {name: _loaded(point) for name, point in _plugin_points().items()}
+    return {name: register for name, register in found.items() if register is not None}
 
 
-def _commands() -> list:
-    """Every command's `register(subparsers)`, in `--help` order."""
-    table = {name: _own_command(module, name) for name, module in _COMMANDS}
-    for name, register in plugin_commands().items():
-        table.setdefault(name, register)  # jaxunilat's own command keeps its name
+def written_summary(point) -> str | None:
+    """The help line that entry point `point`'s `register` gives its command, read from the
+    source of its module without importing it: the string literal `help` of the
+    `add_parser(NAME, help="...")` call in `register` that adds the command. None where
+    the source does not say it so plainly (no such call, aliases, a computed help) or
+    cannot be read; the command is then loaded to list it."""
+    import ast
+    from importlib.machinery import PathFinder
+    from importlib.util import find_spec
+
+    module, _, attr = point.value.partition(":")
+    names = module.strip().split(".")
+    try:
+        spec = find_spec(names[0])  # a top-level name: found, not imported
+        for end in range(2, len(names) + 1):
+            spec = PathFinder.find_spec(".".join(names[:end]), spec.submodule_search_locations)
+        with open(spec.origin, encoding="utf-8") as f:
+            tree = ast.parse(f.read())
+    except (AttributeError, ImportError, OSError, SyntaxError, TypeError, ValueError):
+        return None
+    body = [node for node in tree.body if isinstance(node, ast.FunctionDef) and node.name == attr.strip()]
+    for node in ast.walk(body[0]) if body else ():
+        if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)):
+            continue
+        first = node.args[0] if node.func.attr == "add_parser" and node.args else None
+        if isinstance(first, ast.Constant) and first.value == point.name:
+            keywords = {k.arg: k.value for k in node.keywords}
+            text = keywords.get("help")
+            plain = "aliases" not in keywords and None not in keywords and isinstance(text, ast.Constant)
+            return text.value if plain and isinstance(text.value, str) else None
+    return None
+
+
+def _lazy(point):
+    """`register(subparsers)` that imports entry point `point` only when called."""
+
+    def register(subparsers) -> None:
+        _loaded(point)(subparsers)
+
+    return register
+
+
+def _commands(lazy: bool = False) -> list:
+    """Every command as `(name, register, summary)`, in `--help` order. `summary` is None
+    for a command to register now; with `lazy`, a command of another package whose help
+    line its source gives (`written_summary`) has it, to be registered only if chosen."""
+    table = {name: (name, _own_command(module, name), None) for name, module in _COMMANDS}
+    if lazy:
+        for name, point in _plugin_points().items():
+            summary = written_summary(point)
+            register = _loaded(point) if summary is None else _lazy(point)
+            if name not in table and register is not None:  # jaxunilat's own command keeps its name
+                table[name] = (name, register, summary)
+    else:
+        for name, register in plugin_commands().items():
+            table.setdefault(name, (name, register, None))
 
     def rank(name):
         return (_HELP_ORDER.index(name), "") if name in _HELP_ORDER else (len(_HELP_ORDER), name)
@@ -95,27 +163,70 @@ def _commands() -> list:
     return [table[name] for name in sorted(table, key=rank)]
 
 
-def build_parser() -> Parser:
-    """The full argument parser (errors raise `UsageError`)."""
+class _Commands(argparse._SubParsersAction):
+    """The subparsers of the commands, where a command can wait unloaded: listed with its
+    help line (`jaxunilat --help`), and registered (its package imported) only when the
+    command line names it."""
+
+    def __init__(self, *args, version: str, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.version = version
+        self.waiting: dict = {}
+
+    def add_command(self, name: str, register, summary: str | None) -> None:
+        """Register the command now (`summary` None), else list it until it is chosen."""
+        if summary is None:
+            register(self)
+            if name in self.choices:
+                repeat_global_flags(self.choices[name], self.version)
+        else:
+            self.add_parser(name, help=summary, add_help=False)
+            self.waiting[name] = register
+
+    def _load(self, name: str) -> None:
+        """Replace the waiting command `name` by its parser, at the same place in `--help`."""
+        register = self.waiting.pop(name)
+        del self._name_parser_map[name]
+        place = next(i for i, a in enumerate(self._choices_actions) if a.dest == name)
+        del self._choices_actions[place]
+        self.add_command(name, register, None)
+        moved = [a for a in self._choices_actions[place:] if a.dest == name]
+        for action in moved:
+            self._choices_actions.remove(action)
+            self._choices_actions.insert(place, action)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if values and values[0] in self.waiting:
+            self._load(values[0])
+        super().__call__(parser, namespace, values, option_string)
+
+
+def build_parser(lazy: bool = False) -> Parser:
+    """The full argument parser (errors raise `UsageError`). With `lazy`, the commands of
+    other packages are imported only when the command line names one: `jaxunilat --help`,
+    `--version` and `jaxunilat simulate ...` import no other package."""
     from .. import __version__
     from ._compilation_cache import CACHE_DIR_ENV, NO_CACHE_ENV, cache_dir
 
+    version = f"{PROG} {__version__}"
     parser = Parser(
         prog=PROG,
         description="Differentiable simulation of systems with unilateral constraints [K90].",
         epilog=f"Compiled solvers are cached in {cache_dir()} (${CACHE_DIR_ENV} moves it; --no-cache or "
-        f"{NO_CACHE_ENV}=1 turns it off): a second run skips compilation (simulate, identify: also tracing).",
+        f"{NO_CACHE_ENV}=1 turns it off): a second run skips compilation (simulate, identify: also tracing). "
+        "The options above are also accepted after the command.",
     )
-    parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
-    parser.add_argument(
-        "--no-cache",
-        action="store_true",
-        help="do not use the persistent caches (compiled programs) for this run",
+    add_global_flags(parser, version)
+    commands = parser.add_subparsers(
+        dest="command",
+        metavar="COMMAND",
+        required=True,
+        parser_class=Parser,
+        action=_Commands,
+        version=version,
     )
-    parser.add_argument("--debug", action="store_true", help="on an internal error, print the full traceback")
-    commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=Parser)
-    for register in _commands():
-        register(commands)
+    for name, register, summary in _commands(lazy):
+        commands.add_command(name, register, summary)
     return parser
 
 
@@ -337,7 +448,7 @@ def main(argv: list[str] | None = None) -> int:
         # (not for help and the version, which compute nothing).
         if not {"-h", "--help", "--version"} & set(words):
             check_environment(user_xla_flags)
-        parser = build_parser()
+        parser = build_parser(lazy=True)
         args = parser.parse_args(words)
         if not args.no_cache:
             from ._compilation_cache import enable_compilation_cache

@@ -389,17 +389,24 @@ def read_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
 
 
 def bundled_data(pattern: str = "*.csv") -> list[str]:
-    """The source tree's bundled data files `data/<pattern>`, sorted; [] where they are
-    not shipped (an installed package without its source tree).
+    """The bundled data files matching `pattern` (`drop_trace.csv`, `*.csv`), sorted; []
+    where none is found.
 
-    Looked for beside the package (a checkout or an editable install: the folder that
-    holds `jaxunilat/`), then in the working folder.
+    Looked for in the installed package first (`jaxunilat/_data/`: a wheel or
+    `pip install .` installs the repository's `data/*.csv` and `data/README.md` there),
+    then in the source tree's `data/` beside the package (a checkout or an editable
+    install: the folder that holds `jaxunilat/`), then in the working folder's `data/`.
     """
     import glob
 
     here = os.path.dirname(os.path.abspath(__file__))  # jaxunilat/internal/
-    for root in (os.path.join(here, os.pardir, os.pardir), os.getcwd()):
-        found = sorted(glob.glob(os.path.join(root, "data", pattern)))
+    package = os.path.dirname(here)
+    for folder in (
+        os.path.join(package, "_data"),
+        os.path.join(package, os.pardir, "data"),
+        os.path.join(os.getcwd(), "data"),
+    ):
+        found = sorted(glob.glob(os.path.join(glob.escape(folder), pattern)))
         if found:
             return [os.path.normpath(p) for p in found]
     return []
