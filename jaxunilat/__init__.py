@@ -48,6 +48,7 @@ from ._models import (  # noqa: E402
     HuntCrossley as HuntCrossley,
     KelvinVoigt as KelvinVoigt,
     Logistic as Logistic,
+    NoClosedFormError as NoClosedFormError,
     Softplus as Softplus,
     ball_state as ball_state,
     clearance_force as clearance_force,

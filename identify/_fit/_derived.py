@@ -7,6 +7,8 @@ import functools
 
 import numpy as np
 
+from jaxunilat.internal import check_choice
+
 from ._joint import contact_time_of
 from ._kelvin_voigt import restitution_and_contact_time
 from ._problem import PARAMETERS
@@ -26,10 +28,16 @@ def law_derived(setup):
 
     Kelvin–Voigt: the closed forms (no gravity). Hunt–Crossley: e of one impact at the
     data's typical impact speed (simulated as in `law_restitution`; gradient by central
-    differences, step 1e-4 in the logs) and the undamped Hertz contact time there.
+    differences, step 1e-4 in the logs) and the undamped Hertz contact time there. A law
+    without an entry in `_DERIVED` raises `ValueError` naming it.
     """
-    if setup.law == "kelvin-voigt":
-        return restitution_and_contact_time
+    check_choice("law", setup.law, tuple(_DERIVED))
+    return _DERIVED[setup.law](setup)
+
+
+def _hunt_crossley_derived(setup):
+    """Hunt–Crossley's (e, t_c, ∂e/∂u, ∂log t_c/∂u) at the data's typical impact speed
+    (see `law_derived`); ∂log t_c/∂log κ = −1/(n + 1) with n = 3/2."""
     speed, g = setup.speed, float(setup.datasets[0].gravity)
 
     def derived(lk, lr, mass):
@@ -39,6 +47,13 @@ def law_derived(setup):
 
     return derived
 
+
+#: Each law's derived quantities, by the fit's law name: the closed forms for
+#: Kelvin–Voigt, simulated impacts for Hunt–Crossley.
+_DERIVED = {
+    "kelvin-voigt": lambda setup: restitution_and_contact_time,
+    "hunt-crossley": _hunt_crossley_derived,
+}
 
 #: Central-difference step (in log κ, log k_r) of Hunt–Crossley's ∂e/∂(log κ, log k_r).
 _E_STEP = 1e-4

@@ -222,7 +222,7 @@ LAWS = {"kelvin-voigt": jaxunilat.KelvinVoigt(), "hunt-crossley": jaxunilat.Hunt
 #: that has not ended by then holds the ball: e = 0, t_c = inf.
 _HORIZON = 20.0
 #: Hertz's contact-time constant: t_c = C δ_max/v for n = 3/2 (≈ 2.9432): the undamped
-#: contact time at κ = 5/4, m = v = 1, where δ_max = 1.
+#: contact time at κ = 5/4, m = v = 1, where δ_max = 1 (`hunt_crossley_from_restitution`'s start).
 _HERTZ = jaxunilat.hunt_crossley_contact_time(1.25, 1.0, 1.0)
 #: Entry, deepest point, exit, and the apex after it: the loop stops at a fifth event.
 _MAX_EVENTS = 4
@@ -231,26 +231,17 @@ _MAX_EVENTS = 4
 def _impact(law: str, kappa, k_r, speed, mass, gravity, rtol):
     """One impact at `speed` onto a floor at x = 0: (e, contact time [s], status).
 
-    The horizon is `_HORIZON` times the contact's time scale: the undamped contact time
-    (Kelvin–Voigt π√(m/κ); Hertz C·δ_max/v), or, with gravity, the period of small
-    oscillations about the static penetration δ_s if shorter (slow impacts, where
-    gravity sets the contact's duration). A contact exits before its first upward
+    The horizon is `_HORIZON` times the contact's time scale, the law's `impact_scales`:
+    the undamped contact time (Kelvin–Voigt π√(m/κ); Hertz C·δ_max/v), or, with gravity,
+    the period of small oscillations about the static penetration δ_s if shorter (slow
+    impacts, where gravity sets the contact's duration); its depth scale sets atol. A contact exits before its first upward
     turning point in contact, if at all (there the spring force is below m g and the
     energy below that of the exit point), which this horizon covers with a margin.
     """
     ball = jaxunilat.Ball(
         kappa, k_r, mass=mass, gravity=gravity, drag=None, lower=0.0, upper=None, law=LAWS[law]
     )
-    g_safe = jnp.where(gravity > 0, gravity, 1.0)
-    if law == "kelvin-voigt":
-        scale = jnp.pi * jnp.sqrt(mass / kappa)  # gravity does not change the period
-        depth = speed * jnp.sqrt(mass / kappa) + mass * gravity / kappa
-    else:
-        dmax = (1.25 * mass * speed**2 / kappa) ** 0.4
-        static = (mass * g_safe / kappa) ** (2.0 / 3.0)
-        period = jnp.where(gravity > 0, 2.0 * jnp.pi * jnp.sqrt(static / (1.5 * g_safe)), jnp.inf)
-        scale = jnp.minimum(_HERTZ * dmax / speed, period)
-        depth = dmax + jnp.where(gravity > 0, static, 0.0)
+    scale, depth = LAWS[law].impact_scales(kappa, mass, speed, gravity)
     sol = jaxunilat.simulate(
         ball,
         jnp.stack([jnp.zeros_like(speed), -speed]),
@@ -298,9 +289,9 @@ def _impact_rows(law, kappa, k_r, speed, mass, gravity, rtol) -> tuple[np.ndarra
 
 def _check_law_inputs(law, kappa, k_r, mass, speeds, gravity, rtol):
     check_choice("law", law, tuple(LAWS))
-    unit = "N/m" if law == "kelvin-voigt" else "N/m^1.5"
-    check_range("kappa", kappa, lo=0.0, lo_open=True, unit=unit)
-    check_range("k_r", k_r, lo=0.0, unit="N*s/m" if law == "kelvin-voigt" else "N*s/m^2.5")
+    units = LAWS[law].units
+    check_range("kappa", kappa, lo=0.0, lo_open=True, unit=units["kappa"])
+    check_range("k_r", k_r, lo=0.0, unit=units["k_r"])
     check_range("mass", mass, lo=0.0, lo_open=True, unit="kg")
     check_range("gravity", gravity, lo=0.0, unit="m/s^2")
     check_range("rtol", rtol, lo=1e-14, hi=1e-3)

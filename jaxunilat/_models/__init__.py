@@ -23,6 +23,7 @@ from ._contact import (
     ClampedKelvinVoigt as ClampedKelvinVoigt,
     HuntCrossley as HuntCrossley,
     KelvinVoigt as KelvinVoigt,
+    NoClosedFormError as NoClosedFormError,
     clearance_force as clearance_force,
     contact_time as contact_time,
     damping_ratio as damping_ratio,

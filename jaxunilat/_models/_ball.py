@@ -13,15 +13,8 @@ from jaxtyping import Array, ArrayLike
 
 from ..internal._errors import InputError
 from ..internal._validate import float_field, is_concrete
-from . import _rest, _rest_smooth
-from ._contact import (
-    AbstractContactLaw,
-    ClampedKelvinVoigt,
-    HuntCrossley,
-    KelvinVoigt,
-    hunt_crossley_step_limit,
-    rk4_step_limit,
-)
+from . import _rest_smooth
+from ._contact import AbstractContactLaw, KelvinVoigt, NoClosedFormError
 from ._flight import apex_rise, apex_time, fall_time, flight_state, longest_fall, rise_time
 from ._heaviside import AbstractHeaviside, Exact, Logistic, Softplus
 from ._model import (
@@ -174,29 +167,30 @@ class Ball(AbstractClosedFormFlight, AbstractCanRest, AbstractKinkedObservable, 
     def rk4_step_limit(self, xp=jnp, y0=None):
         """The largest RK4 step, s, and the contact's time scale t_c, s.
 
-        Kelvin–Voigt and the clamped law: a tenth of the contact time t_c = π/ω_d of κ,
-        k_r and m (see `jaxunilat._models._contact.rk4_step_limit`). Hunt–Crossley
-        (n ≥ 1), given the initial state `y0` = (x0 m, v0 m/s): a tenth of π/ω at the
-        deepest penetration the initial energy allows (see
+        The law's `rk4_step_limit`, given the speed bound of the initial state `y0` =
+        (x0 m, v0 m/s) where there is one: Kelvin–Voigt and the clamped law, a tenth of
+        the contact time t_c = π/ω_d of κ, k_r and m (see
+        `jaxunilat._models._contact.rk4_step_limit`); Hunt–Crossley (n ≥ 1), a tenth of
+        π/ω at the deepest penetration the initial energy allows (see
         `jaxunilat._models._contact.hunt_crossley_step_limit`). `None` without walls, and
-        for Hunt–Crossley without `y0`.
+        where the law needs a speed bound and `y0` is not given (`NoClosedFormError`):
+        `simulate` then warns that dt is unchecked.
         """
         if self.num_switches == 0:
             return None
-        if isinstance(self.law, (KelvinVoigt, ClampedKelvinVoigt)):
-            return rk4_step_limit(self.kappa, self.k_r, self.mass, xp)
-        if not isinstance(self.law, HuntCrossley) or y0 is None:
-            return None
-        return hunt_crossley_step_limit(
-            self.kappa, self.k_r, self.mass, self.gravity, self._speed_bound(y0, xp), self.law.exponent, xp
-        )
+        speed = None if y0 is None else self._speed_bound(y0, xp)
+        try:
+            return self.law.rk4_step_limit(self.kappa, self.k_r, self.mass, self.gravity, speed, xp)
+        except NoClosedFormError:
+            if y0 is None:
+                return None
+            raise
 
     def _speed_bound(self, y0, xp):
         """An upper bound on the ball's speed at any wall, m/s: its energy at `y0`
         (kinetic, gravity's down to the lower wall, and a start's stored contact
-        energy) cannot grow (damping and drag only remove it)."""
+        energy, the law's `potential`) cannot grow (damping and drag only remove it)."""
         x0, v0 = y0[0], y0[1]
-        n1 = self.law.exponent + 1.0
         speed2 = v0 * v0
         for depth in (
             (self.lower - x0) if self.lower is not None else None,
@@ -204,7 +198,7 @@ class Ball(AbstractClosedFormFlight, AbstractCanRest, AbstractKinkedObservable, 
         ):
             if depth is not None:
                 pen = xp.maximum(depth, 0.0)
-                speed2 = speed2 + 2.0 * self.kappa * pen**n1 / (n1 * self.mass)
+                speed2 = speed2 + 2.0 * self.law.potential(pen, self.kappa) / self.mass
         if self.lower is not None:
             speed2 = speed2 + 2.0 * xp.maximum(self.gravity, 0.0) * xp.maximum(x0 - self.lower, 0.0)
         return xp.sqrt(speed2)
@@ -348,23 +342,17 @@ class Ball(AbstractClosedFormFlight, AbstractCanRest, AbstractKinkedObservable, 
 
     @property
     def can_rest(self) -> bool:
-        """Whether `rest_error` can ever be finite (static): a lower wall, a law and a
-        Heaviside option with a rest criterion. The time-stepping solvers build their rest
-        detection only then."""
-        laws = (KelvinVoigt, ClampedKelvinVoigt, HuntCrossley)
-        return (
-            self.lower is not None
-            and isinstance(self.law, laws)
-            and isinstance(self.heaviside, (Exact, Logistic, Softplus))
-        )
+        """Whether `rest_error` can ever be finite (static): a lower wall and a
+        Heaviside option with a rest criterion (every law has one: `AbstractContactLaw`'s
+        `rest_error`). The time-stepping solvers build their rest detection only then."""
+        return self.lower is not None and isinstance(self.heaviside, (Exact, Logistic, Softplus))
 
     def _smooth_equilibrium(self):
         """The parameter-only part of the smoothed rest criterion
         (`jaxunilat._models._rest_smooth`): (x̂ m, k_min, k_max, r, residual m/s²)."""
         pos = self.gravity > 0
         g = jnp.where(pos, self.gravity, 1.0)  # g = 0 never rests: safe unused values
-        hc = isinstance(self.law, HuntCrossley)
-        x_hat, k_min, k_max, r = _rest_smooth.smooth_equilibrium(
+        x_hat, k_min, k_max, r = self.law.smooth_equilibrium(
             self.lower,
             self.upper,
             self.kappa,
@@ -372,8 +360,6 @@ class Ball(AbstractClosedFormFlight, AbstractCanRest, AbstractKinkedObservable, 
             g,
             self.heaviside.eps,
             "softplus" if isinstance(self.heaviside, Softplus) else "logistic",
-            self.law.exponent if hc else None,
-            isinstance(self.law, ClampedKelvinVoigt),
         )
         # |A(x̂)| at v = 0 (the drag vanishes) and its rounding, m/s².
         zero = jnp.zeros_like(x_hat)
@@ -409,7 +395,8 @@ class Ball(AbstractClosedFormFlight, AbstractCanRest, AbstractKinkedObservable, 
         drag (its closed form is exact), c·A²·min(ωT, 1/(4ζ)) with drag (c = k²g, A the
         amplitude about the static deflection, T = `horizon`), never more than 2A (and
         2A for the clamped law while its clamp may act), and for Hunt–Crossley the
-        largest distance from the rest state that the energy allows. Other laws: +inf.
+        largest distance from the rest state that the energy allows: the law's
+        `rest_error` (`AbstractContactLaw`).
 
         With a smooth Heaviside (the time-stepping solvers only) `mask` is unused: the
         bound is `jaxunilat._models._rest_smooth`'s, about the smoothed equilibrium, valid for all
@@ -422,46 +409,23 @@ class Ball(AbstractClosedFormFlight, AbstractCanRest, AbstractKinkedObservable, 
         if self.heaviside.smooth:
             return self._smooth_rest_error(y, self._smooth_equilibrium())
         pen = self.lower - x
-        if isinstance(self.law, HuntCrossley):
-            err = _rest.hunt_crossley_rest_error(
-                pen, v, self.kappa, self.mass, self.gravity, self.law.exponent
-            )
-        elif isinstance(self.law, (KelvinVoigt, ClampedKelvinVoigt)):
-            err = _rest.kelvin_voigt_rest_error(
-                pen,
-                v,
-                horizon,
-                self.kappa,
-                self.k_r,
-                self.mass,
-                self.gravity,
-                self.drag,
-                isinstance(self.law, ClampedKelvinVoigt),
-            )
-        else:
-            return inf
+        err = self.law.rest_error(pen, v, horizon, self.kappa, self.k_r, self.mass, self.gravity, self.drag)
         return jnp.where(self._lower_only(mask), err, inf)
 
     def rest_state(self, y: Array, tau: Array) -> Array:
         """The state `tau` s after `y` in a contact with the lower wall that never ends
         (`rest_error` finite), within `rest_error`'s bound of the true motion: for
         Kelvin–Voigt and the clamped law the damped oscillator about x = wall − mg/κ in
-        closed form; for Hunt–Crossley the rest state x = wall − (mg/κ)^(1/n), v = 0; with a
-        smooth Heaviside the smoothed rest state (`jaxunilat._models._rest_smooth`), v = 0."""
+        closed form; for Hunt–Crossley the rest state x = wall − (mg/κ)^(1/n), v = 0 (the
+        law's `rest_state`); with a smooth Heaviside the smoothed rest state
+        (`jaxunilat._models._rest_smooth`), v = 0."""
         x, v = y[0], y[1]
         if not self.can_rest:
             return y  # never used: `rest_error` is +inf
         if self.heaviside.smooth:
             x_hat = self._smooth_equilibrium()[0]
             return jnp.stack([x_hat + jnp.zeros_like(x), jnp.zeros_like(v)])
-        if isinstance(self.law, HuntCrossley):
-            # (g = 0 never rests: a safe g keeps the unused power's derivative finite.)
-            g = jnp.where(self.gravity > 0, self.gravity, 1.0)
-            star = _rest.hunt_crossley_deflection(self.kappa, self.mass, g, self.law.exponent)
-            return jnp.stack([self.lower - star + jnp.zeros_like(x), jnp.zeros_like(v)])
-        u, vv = _rest.kelvin_voigt_rest_state(
-            self.lower - x, v, tau, self.kappa, self.k_r, self.mass, self.gravity
-        )
+        u, vv = self.law.rest_state(self.lower - x, v, tau, self.kappa, self.k_r, self.mass, self.gravity)
         return jnp.stack([self.lower + u, vv])
 
     def energy(self, x: Array, v: Array) -> Array:

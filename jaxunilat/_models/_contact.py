@@ -17,6 +17,13 @@ and the inverse map (e, t_c) → (κ, k_r):
 
     κ   = m (π² + ln² e) / t_c²
     k_r = −2 m ln e / t_c
+
+Each law owns its physics: the closed forms above, the RK4 step limit, the resting
+ball's criterion and state, and the smoothed equilibrium are methods of the law
+(`AbstractContactLaw` lists them), which the models call instead of testing the law's
+type. The module-level functions (`restitution`, `contact_time`, …) are Kelvin–Voigt's
+(and `hunt_crossley_contact_time`, `hunt_crossley_step_limit` Hunt–Crossley's); the
+laws' methods call them.
 """
 
 from __future__ import annotations
@@ -31,14 +38,46 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike
 
 from ..internal._validate import InputTypeError, check_range, real_number
+from . import _rest, _rest_smooth
 from ._heaviside import AbstractHeaviside, Exact
 
 
-class AbstractContactLaw(eqx.Module):
-    """A penalty contact law F(δ, δ̇) for one wall.
+class NoClosedFormError(NotImplementedError):
+    """A contact law has no closed form for the quantity asked for (the message names
+    the law and the quantity)."""
 
-    Subclasses implement `force` and `potential`. All laws reduce to the same
-    spring κδ when damping is off.
+
+def _no_closed_form(law, quantity: str, hint: str = "") -> typing.NoReturn:
+    raise NoClosedFormError(f"{type(law).__name__} has no closed-form {quantity}{hint}")
+
+
+class AbstractContactLaw(eqx.Module):
+    """A penalty contact law F(δ, δ̇) for one wall, and the physics that depends on it.
+
+    All laws reduce to the same spring κδ (δⁿ for Hunt–Crossley) when damping is off.
+    Every law-specific quantity the engine or `identify` uses is a method here, so a
+    new law must implement each one (equinox refuses to instantiate a law that misses
+    one, and names it). A law without a closed form for a quantity raises
+    `NoClosedFormError` naming itself and the quantity; it never returns +inf or `None`
+    in its place.
+
+    **What a law implements, and who calls it:**
+
+    - `force`, `potential` (N, J): every model's right-hand side and energy output
+      (`Ball._wall_terms`, `Ball.energy`, `Coupling._joint_force`).
+    - `restitution`, `contact_time`, `parameters_from_restitution`: the impact's closed
+      forms without gravity, e = |v_out/v_in| and t_c (s), and their inverse
+      (e, t_c) → (κ, k_r) [K90 §5.1; Hunt & Crossley 1975].
+    - `rk4_step_limit` (s): `Ball.rk4_step_limit` and `Coupling.rk4_step_limit`, which
+      `simulate(solver="rk4")` checks dt against.
+    - `rest_error`, `rest_state`: `Ball.rest_error` and `Ball.rest_state`, the closed
+      form of a ball resting on the lower wall with the exact Heaviside (see
+      `jaxunilat._models._rest`).
+    - `smooth_equilibrium`: `Ball._smooth_equilibrium`, the rest criterion with a smooth
+      Heaviside (see `jaxunilat._models._rest_smooth`).
+    - `impact_scales`, `units`: the time and depth scales of one impact (`identify`'s
+      simulated restitution curve sets its horizon and tolerance from them) and the
+      units of κ and k_r (`identify`'s input checks).
     """
 
     @abc.abstractmethod
@@ -58,9 +97,103 @@ class AbstractContactLaw(eqx.Module):
     def potential(self, pen: Array, kappa: Array) -> Array:
         """The elastic energy stored in the contact, J."""
 
+    @abc.abstractmethod
+    def restitution(self, kappa, k_r, mass, speed) -> Array:
+        """The restitution e = |v_out/v_in| of one impact at `speed` (m/s) without
+        gravity, for κ, k_r and the mass m (kg); `NoClosedFormError` without a closed form."""
+
+    @abc.abstractmethod
+    def contact_time(self, kappa, k_r, mass, speed) -> Array:
+        """The contact time, s, of one impact at `speed` (m/s) without gravity;
+        `NoClosedFormError` without a closed form."""
+
+    @abc.abstractmethod
+    def parameters_from_restitution(self, e, t_c, mass, speed) -> tuple[Array, Array]:
+        """The inverse map (e, t_c (s), m (kg), speed (m/s)) → (κ, k_r);
+        `NoClosedFormError` without a closed form."""
+
+    @abc.abstractmethod
+    def rk4_step_limit(self, kappa, k_r, mass, gravity, speed, xp=jnp) -> tuple[Array, Array]:
+        """The largest RK4 step, s, for this contact, and its time scale t_c, s.
+
+        **Arguments:** κ, k_r (or `None`), the contact mass (kg), `gravity` (m/s², or
+        `None` where no gravity presses into the wall), `speed`: an upper bound on the
+        speed at the wall (m/s), or `None` where the model knows none; `xp` the array
+        namespace. `NoClosedFormError` where the law needs what it is not given.
+        """
+
+    @abc.abstractmethod
+    def rest_error(self, pen, v, horizon, kappa, k_r, mass, gravity, drag) -> Array:
+        """The exact-Heaviside rest criterion on the lower wall (`Ball.rest_error`): +inf
+        where the contact can still end, else a bound, m, on the distance between the
+        true motion and `rest_state` over `horizon` s. `pen` = wall − x (m), `v` (m/s),
+        `drag` k (s/m) or `None`."""
+
+    @abc.abstractmethod
+    def rest_state(self, pen, v, tau, kappa, k_r, mass, gravity) -> tuple[Array, Array]:
+        """(x − wall (m), v (m/s)) `tau` s after (`pen` = wall − x, `v`) in a contact
+        with the lower wall that never ends (`rest_error` finite)."""
+
+    @abc.abstractmethod
+    def smooth_equilibrium(self, lower, upper, kappa, mass, gravity, eps, kind):
+        """The smoothed rest position and stiffness bounds (x̂ m, k_min, k_max 1/s², r m)
+        of `jaxunilat._models._rest_smooth.smooth_equilibrium` for this law; `kind` is
+        "logistic" or "softplus"."""
+
+    @abc.abstractmethod
+    def impact_scales(self, kappa, mass, speed, gravity) -> tuple[Array, Array]:
+        """(time scale, s; depth scale, m) of one impact at `speed` (m/s) under
+        `gravity` (m/s², ≥ 0): the undamped contact time, or the period of small
+        oscillations about the static penetration if shorter, and the deepest
+        undamped penetration plus the static one."""
+
+    @property
+    @abc.abstractmethod
+    def units(self) -> dict[str, str]:
+        """The units of κ and k_r: `{"kappa": ..., "k_r": ...}`."""
+
+
+class _AbstractLinearLaw(AbstractContactLaw):
+    """What the two linear spring–damper laws share: the spring κδ, its potential
+    ½κδ², the RK4 step limit of the linear oscillator (the clamp only removes damping)
+    and the resting ball's closed form [K90 §5.1; `jaxunilat._models._rest`]."""
+
+    #: Whether the damping force is clamped to ±κδ (static).
+    _clamped: typing.ClassVar[bool]
+
+    def potential(self, pen, kappa):
+        return 0.5 * kappa * pen**2
+
+    def rk4_step_limit(self, kappa, k_r, mass, gravity, speed, xp=jnp):
+        """A tenth of the contact time π/ω_d (see the module's `rk4_step_limit`);
+        `gravity` and `speed` are unused."""
+        del gravity, speed
+        return rk4_step_limit(kappa, k_r, mass, xp)
+
+    def rest_error(self, pen, v, horizon, kappa, k_r, mass, gravity, drag):
+        return _rest.kelvin_voigt_rest_error(pen, v, horizon, kappa, k_r, mass, gravity, drag, self._clamped)
+
+    def rest_state(self, pen, v, tau, kappa, k_r, mass, gravity):
+        return _rest.kelvin_voigt_rest_state(pen, v, tau, kappa, k_r, mass, gravity)
+
+    def smooth_equilibrium(self, lower, upper, kappa, mass, gravity, eps, kind):
+        return _rest_smooth.smooth_equilibrium(
+            lower, upper, kappa, mass, gravity, eps, kind, None, self._clamped
+        )
+
+    def impact_scales(self, kappa, mass, speed, gravity):
+        """π√(m/κ) (gravity does not change the period) and v√(m/κ) + mg/κ."""
+        scale = jnp.pi * jnp.sqrt(mass / kappa)
+        depth = speed * jnp.sqrt(mass / kappa) + mass * gravity / kappa
+        return scale, depth
+
+    @property
+    def units(self):
+        return {"kappa": "N/m", "k_r": "N*s/m"}
+
 
 @typing.final
-class KelvinVoigt(AbstractContactLaw):
+class KelvinVoigt(_AbstractLinearLaw):
     """The paper's law: F = κδ + k_r δ̇ H [K90 Eq. 2.4, 3.2]. The default.
 
     κ in N/m (the paper's kg/s²), k_r in N·s/m (kg/s).
@@ -72,28 +205,44 @@ class KelvinVoigt(AbstractContactLaw):
     pulls (is adhesive) just before separation, down to about −1.5 N in example 2.
     """
 
+    _clamped: typing.ClassVar[bool] = False
+
     def force(self, pen, pen_rate, on, kappa, k_r):
         f = kappa * pen
         if k_r is not None:
             f = f + k_r * pen_rate * on
         return f
 
-    def potential(self, pen, kappa):
-        return 0.5 * kappa * pen**2
+    def restitution(self, kappa, k_r, mass, speed=None):
+        """e = exp(−πζ/√(1 − ζ²)), independent of the speed (see `restitution`)."""
+        del speed
+        return restitution(kappa, k_r, mass)
+
+    def contact_time(self, kappa, k_r, mass, speed=None):
+        """t_c = π/ω_d, s, independent of the speed (see `contact_time`)."""
+        del speed
+        return contact_time(kappa, k_r, mass)
+
+    def parameters_from_restitution(self, e, t_c, mass, speed=None):
+        """κ = m(π² + ln²e)/t_c², k_r = −2 m ln e/t_c (see `parameters_from_restitution`)."""
+        del speed
+        return parameters_from_restitution(e, t_c, mass)
 
 
 @typing.final
-class ClampedKelvinVoigt(AbstractContactLaw):
+class ClampedKelvinVoigt(_AbstractLinearLaw):
     """A spring–damper whose damping force is bounded by the spring force.
 
     F = κδ + clip(k_r δ̇ H, −κδ, κδ), as in the Modelica `ElastoGap`. The force is
     continuous at touchdown (it starts at zero) and never adhesive (F ≥ 0).
 
-    Restitution and contact time: no closed form. For light damping (ζ ≲ 0.1) they
-    approach the Kelvin–Voigt values of `restitution` and `contact_time`; the
-    clamp makes the contact dissipate less than Kelvin–Voigt with the same k_r,
-    so e is larger. Compute them numerically with `simulate`.
+    Restitution and contact time: no closed form (`NoClosedFormError`). For light
+    damping (ζ ≲ 0.1) they approach the Kelvin–Voigt values of `restitution` and
+    `contact_time`; the clamp makes the contact dissipate less than Kelvin–Voigt with
+    the same k_r, so e is larger. Compute them numerically with `simulate`.
     """
+
+    _clamped: typing.ClassVar[bool] = True
 
     def force(self, pen, pen_rate, on, kappa, k_r):
         spring = kappa * pen
@@ -101,8 +250,14 @@ class ClampedKelvinVoigt(AbstractContactLaw):
             return spring
         return spring + jnp.clip(k_r * pen_rate * on, -spring, spring)
 
-    def potential(self, pen, kappa):
-        return 0.5 * kappa * pen**2
+    def restitution(self, kappa, k_r, mass, speed=None):
+        _no_closed_form(self, "restitution", "; simulate one impact instead")
+
+    def contact_time(self, kappa, k_r, mass, speed=None):
+        _no_closed_form(self, "contact time", "; simulate one impact instead")
+
+    def parameters_from_restitution(self, e, t_c, mass, speed=None):
+        _no_closed_form(self, "map (e, t_c) -> (kappa, k_r)")
 
 
 @typing.final
@@ -118,10 +273,10 @@ class HuntCrossley(AbstractContactLaw):
     Relations (Hunt & Crossley 1975; Marhefka & Orin 1999), for impact speed v:
 
     - Restitution depends on speed: e ≈ 1 − (2/3)·χ·v for small χv
-      (χ ≈ 3(1 − e)/(2v)).
+      (χ ≈ 3(1 − e)/(2v)); no closed form here (`NoClosedFormError`).
     - Undamped maximum penetration δ_max = ((n + 1) m v² / (2κ))^(1/(n+1)).
     - Undamped contact time t_c = 2 (δ_max / v) · √π Γ(1 + 1/(n+1)) / Γ(1/2 + 1/(n+1));
-      for n = 3/2 this is t_c ≈ 2.9432 δ_max / v.
+      for n = 3/2 this is t_c ≈ 2.9432 δ_max / v (`contact_time` with `k_r=None`).
 
     The force vanishes continuously at touchdown, but it is adhesive when
     δ̇ < −1/χ (very fast separation); the law is not clamped.
@@ -150,6 +305,66 @@ class HuntCrossley(AbstractContactLaw):
         safe = jnp.where(inside, pen, jnp.ones_like(pen))
         n1 = self.exponent + 1.0
         return jnp.where(inside, kappa * safe**n1 / n1, jnp.zeros_like(pen))
+
+    def restitution(self, kappa, k_r, mass, speed):
+        _no_closed_form(self, "restitution", "; simulate one impact instead")
+
+    def contact_time(self, kappa, k_r, mass, speed):
+        """The undamped contact time, s (see `hunt_crossley_contact_time`); only for
+        `k_r=None` (damping shortens it, and that has no closed form)."""
+        if k_r is not None:
+            _no_closed_form(self, "contact time with damping", "; pass k_r=None for the undamped time")
+        return hunt_crossley_contact_time(kappa, mass, speed, self.exponent)
+
+    def parameters_from_restitution(self, e, t_c, mass, speed):
+        _no_closed_form(self, "map (e, t_c) -> (kappa, k_r)")
+
+    def rk4_step_limit(self, kappa, k_r, mass, gravity, speed, xp=jnp):
+        """A tenth of π/ω at the deepest penetration `speed` and `gravity` allow (see
+        `hunt_crossley_step_limit`); `NoClosedFormError` without a speed bound."""
+        if speed is None:
+            _no_closed_form(self, "RK4 step limit without a bound on the impact speed")
+        g = 0.0 if gravity is None else gravity
+        return hunt_crossley_step_limit(kappa, k_r, mass, g, speed, self.exponent, xp)
+
+    def rest_error(self, pen, v, horizon, kappa, k_r, mass, gravity, drag):
+        """The energy bound about δ* = (mg/κ)^(1/n) (see
+        `jaxunilat._models._rest.hunt_crossley_rest_error`); `horizon`, `k_r` and `drag`
+        only dissipate, and are unused."""
+        del horizon, k_r, drag
+        return _rest.hunt_crossley_rest_error(pen, v, kappa, mass, gravity, self.exponent)
+
+    def rest_state(self, pen, v, tau, kappa, k_r, mass, gravity):
+        """The exact rest state x − wall = −δ*, v = 0."""
+        del tau, k_r
+        # (g = 0 never rests: a safe g keeps the unused power's derivative finite.)
+        g = jnp.where(gravity > 0, gravity, 1.0)
+        star = _rest.hunt_crossley_deflection(kappa, mass, g, self.exponent)
+        return jnp.zeros_like(pen) - star, jnp.zeros_like(v)
+
+    def smooth_equilibrium(self, lower, upper, kappa, mass, gravity, eps, kind):
+        return _rest_smooth.smooth_equilibrium(
+            lower, upper, kappa, mass, gravity, eps, kind, self.exponent, False
+        )
+
+    def impact_scales(self, kappa, mass, speed, gravity):
+        """The undamped contact time C·δ_max/v (C from `hunt_crossley_contact_time`), or
+        the period 2π√(δ_s/(n g)) about the static penetration δ_s = (mg/κ)^(1/n) if
+        shorter; depth δ_max + δ_s."""
+        n = self.exponent
+        n1 = n + 1.0
+        constant = hunt_crossley_contact_time(0.5 * n1, 1.0, 1.0, n)  # δ_max = 1 at m = v = 1
+        g_safe = jnp.where(gravity > 0, gravity, 1.0)
+        dmax = (0.5 * n1 * mass * speed**2 / kappa) ** (1.0 / n1)
+        static = (mass * g_safe / kappa) ** (1.0 / n)
+        period = jnp.where(gravity > 0, 2.0 * jnp.pi * jnp.sqrt(static / (n * g_safe)), jnp.inf)
+        scale = jnp.minimum(constant * dmax / speed, period)
+        depth = dmax + jnp.where(gravity > 0, static, 0.0)
+        return scale, depth
+
+    @property
+    def units(self):
+        return {"kappa": f"N/m^{self.exponent:g}", "k_r": f"N*s/m^{self.exponent + 1.0:g}"}
 
 
 #: The valid ranges of the helpers' parameters (`check_range` keywords).

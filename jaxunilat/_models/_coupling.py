@@ -40,7 +40,7 @@ from jaxtyping import Array
 
 from ..internal._errors import InputError
 from ..internal._validate import check_choice, float_field
-from ._contact import AbstractContactLaw, ClampedKelvinVoigt, KelvinVoigt, rk4_step_limit
+from ._contact import AbstractContactLaw, KelvinVoigt, NoClosedFormError
 from ._heaviside import AbstractHeaviside, Exact
 from ._model import AbstractContactModel, AbstractSwitchedModel
 
@@ -252,17 +252,21 @@ class Coupling(AbstractSwitchedModel, AbstractContactModel):
         return self.b * (self.c * t + jnp.expm1(-self.a * t) / self.a)
 
     def rk4_step_limit(self, xp=jnp, y0=None):
-        """The largest RK4 step, s, and the joint's contact time, s: a tenth of the
-        Kelvin–Voigt contact time of κ, the damping k_r + h and the contact mass J_t/l
-        (see `jaxunilat._models._contact.rk4_step_limit`). `None` for `HuntCrossley`:
-        its stiffness grows with depth, and the drive's work leaves the deepest
-        penetration without an a-priori bound (`simulate` then warns,
-        `UncheckedStepWarning`)."""
-        if not isinstance(self.law, (KelvinVoigt, ClampedKelvinVoigt)):
-            return None
+        """The largest RK4 step, s, and the joint's contact time, s: the law's
+        `rk4_step_limit` for κ, the damping k_r + h and the contact mass J_t/l, without a
+        speed bound and without gravity pressing into the joint. Kelvin–Voigt and the
+        clamped law: a tenth of the contact time (see
+        `jaxunilat._models._contact.rk4_step_limit`). `None` where the law needs a speed
+        bound (`HuntCrossley`: its stiffness grows with depth, and the drive's work
+        leaves the deepest penetration without an a-priori bound), which the law says by
+        raising `NoClosedFormError`; `simulate` then warns (`UncheckedStepWarning`)."""
+        del y0
         damping = [d for d in (self.k_r, self.h) if d is not None]
         k_r = None if not damping else sum(damping[1:], damping[0])
-        return rk4_step_limit(self.kappa, k_r, self.j_t / self.length, xp)
+        try:
+            return self.law.rk4_step_limit(self.kappa, k_r, self.j_t / self.length, None, None, xp)
+        except NoClosedFormError:
+            return None
 
     # -- physics ------------------------------------------------------------------
 
