@@ -68,6 +68,16 @@ class Frames:
         fx, fy = self.factor
         return (np.asarray(x) + 0.5) / fx - 0.5, (np.asarray(y) + 0.5) / fy - 0.5
 
+    def sensor_row(self, x, y):
+        """Where source display px (x, y) lie down the sensor's rows: 0 at the stored
+        picture's first row, 1 at its last. A rolling shutter reads the rows as stored (the
+        display rotation turns them for viewing): a portrait clip stored landscape reads
+        across the displayed columns."""
+        w, h = self.source_size
+        x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+        fx, fy = x / max(w - 1, 1), y / max(h - 1, 1)
+        return {0: fy, 90: fx, 180: 1.0 - fy, 270: 1.0 - fx}[self.rotation % 360]
+
     def describe(self) -> str:
         """One line: codec, size, frames, rate, rotation."""
         w, h = self.source_size

@@ -11,6 +11,13 @@ squares, an extra scatter s added to every frame's tracking uncertainty so that 
 chi-square equals its degrees of freedom), and frames beyond `OUTLIER` sigma are dropped.
 Impacts are where successive parabolas meet (with a common G their difference is linear
 in t, so they meet once); the contact level is the parabolas' height there.
+
+A rolling shutter exposes each sensor row a little later than the one before, so a frame
+shows the ball at its time stamp plus the readout's share at the ball's row: a free fall
+becomes a sheared parabola (a falling ball stretched, a rising one squeezed, the release's
+fall alone curved by a few to tens of percent more or less). Given each frame's position
+down the sensor's rows, the readout is fitted to the flights and, where it shows beyond
+chance, the flights are fitted on the corrected times (`find_flights`, `fit_readout`).
 """
 
 from __future__ import annotations
@@ -25,11 +32,20 @@ from scipy.signal import find_peaks
 OUTLIER = 4.0
 #: The least tracking uncertainty assumed, px.
 MIN_SIGMA = 0.01
-#: Successive flights more than this many frame steps apart meet at no impact (a bounce
-#: or more was missed between them).
+#: Successive flights more than this many frame steps apart, and further apart than the
+#: later flight lasts, meet at no impact (a bounce or more was missed between them: the
+#: flight missed would last longer than the later one).
 MAX_GAP = 5.5
 #: The fewest frames a flight needs (two parameters and one check).
 MIN_FRAMES = 3
+#: The flights are selected on this many trial readouts besides 0 (up to a frame interval)
+#: before the readout is fitted to each selection.
+READOUT_TRIALS = 3
+#: The readout's fit weighs frames beyond this many sigma linearly (Huber), not squared.
+HUBER = 2.0
+#: A rolling shutter's readout is fitted only where it lowers the flights' robust residual
+#: sum (`_robust_cost`, in units of sigma squared) by this much (one parameter: 25 is 5 sigma).
+READOUT_SIGNIFICANCE = 25.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,6 +87,8 @@ class Flights:
       between flights with no segment left out between them; `impact_after`: the index
       of the flight before each impact.
     - `residual`: each kept frame's residual, px.
+    - `t`: s, the time of every tracked frame that the flights are fitted on: the frame's
+      time stamp, plus `readout` (s) × its sensor row (0-1) where a rolling shutter was found.
     """
 
     flights: tuple[Flight, ...]
@@ -83,6 +101,8 @@ class Flights:
     impacts: np.ndarray
     impact_after: tuple[int, ...]
     residual: np.ndarray
+    t: np.ndarray
+    readout: float = 0.0
 
 
 def _fit_fixed(t, y, w, gravity):
@@ -197,19 +217,71 @@ def _scatter_for(r, sigma, dof) -> float:
 
 
 def find_flights(
-    t, y, sigma_track, gravity0: float, *, prominence: float, tol: float, level_spread: float
+    t,
+    y,
+    sigma_track,
+    gravity0: float,
+    *,
+    prominence: float,
+    tol: float,
+    level_spread: float,
+    rows=None,
+    max_readout: float = 0.0,
 ) -> Flights | None:
     """The free flights of a trace (`t`: s; `y`: px, NaN where not tracked; `sigma_track`:
     px), starting from `gravity0` px/s²; None if not one flight of `MIN_FRAMES` frames.
 
     `prominence`, `tol`: px (see the module docstring); `level_spread`: px, how far an
     impact's level may be from the impacts' median (farther: not an impact). A flight with
-    no impact at either end is dropped when others have one (it is not the ball's)."""
+    no impact at either end is dropped when others have one (it is not the ball's).
+
+    `rows`: each frame's position down the sensor's rows (0 at the first row read, 1 at the
+    last; None: no rolling shutter is looked for) and `max_readout` (s, at most a frame
+    interval): a rolling shutter exposes each row `readout` × row later than the first, so
+    the ball's time is t + readout × row (a sensor reads the rows it stores from the first
+    to the last: readout ≥ 0). The flights are found on the time stamps and on
+    `READOUT_TRIALS` trial readouts (a sheared flight, the release's fall, may fit
+    one parabola only near the right one), the readout is fitted (`fit_readout`) to each
+    selection and, where it improves the fit beyond chance, the flights are found again on
+    those times; of the outcomes, the one that keeps the most frames (then the least
+    scatter) is taken."""
     found = np.flatnonzero(np.isfinite(y))
     sig = np.where(np.isfinite(sigma_track), sigma_track, np.nanmedian(sigma_track))
     sig = np.maximum(sig, MIN_SIGMA)
     segs = [found[s] for s in segments(y[found], prominence)]
+    t = np.asarray(t, dtype=float)
     step = float(np.median(np.diff(t)))
+    out = _flights_on(segs, t, y, sig, gravity0, step, tol, level_spread)
+    if out is None or rows is None or not max_readout > 0:
+        return None if out is None else _result(*out, t, sig, 0.0)
+    rows = np.where(np.isfinite(rows), rows, 0.0)
+    # a flight that the shutter shears (the release: it only falls) may miss the selection on
+    # the time stamps: select on a few trial readouts, then fit the readout to the best one's
+    best, best_score = (out, t, 0.0), _score(out)
+    for trial in np.linspace(0.0, max_readout, READOUT_TRIALS + 1):
+        found = (
+            out
+            if trial == 0
+            else _flights_on(segs, t + trial * rows, y, sig, out[1][0], step, tol, level_spread)
+        )
+        if found is None:
+            continue
+        readout = fit_readout([g for g, _ in found[0]], t, y, sig, found[1][2], rows, max_readout)
+        again = _flights_on(segs, t + readout * rows, y, sig, found[1][0], step, tol, level_spread)
+        if again is not None and _score(again) > best_score:
+            best, best_score = (again, t + readout * rows, readout), _score(again)
+    (groups, solved), t_best, readout = best
+    return _result(groups, solved, t_best, sig, readout)
+
+
+def _score(out) -> tuple[int, float]:
+    """Which of two flight selections is better: more frames kept, then less scatter."""
+    groups, solved = out
+    return sum(len(g) for g, _ in groups), -solved[2]
+
+
+def _flights_on(segs, t, y, sig, gravity0, step, tol, level_spread):
+    """(groups, the joint solution `_solve`) of the segments' flights on times `t`, or None."""
     gravity = gravity0
     for _ in range(3):
         groups = _select(segs, t, y, gravity, tol)
@@ -236,6 +308,10 @@ def find_flights(
             return None
     else:
         solved = _solve(groups, t, y, sig, gravity, step, tol, level_spread)
+    return groups, solved
+
+
+def _result(groups, solved, t, sig, readout) -> Flights:
     gravity, g_sigma, s, r, flights, impacts, after, _, _ = solved
     kept = np.concatenate([g for g, _ in groups])
     order = np.argsort(kept)
@@ -250,7 +326,62 @@ def find_flights(
         impacts=np.asarray(impacts, dtype=float).reshape(-1, 2),
         impact_after=tuple(after),
         residual=r[order],
+        t=t,
+        readout=float(readout),
     )
+
+
+def fit_readout(groups, t, y, sig, scatter, rows, max_readout) -> float:
+    """The rolling shutter's readout time (s, 0 to `max_readout`) that best fits the
+    flights (G free, A and B per flight; a robust sum, `_chi2`) on the times t + readout ×
+    rows, or 0 where it lowers that sum by less than `READOUT_SIGNIFICANCE` (weights: the
+    tracking noise and the extra scatter left at the fitted readout, starting from `scatter`). A
+    free fall read out row by row is a sheared parabola: a falling ball is stretched (its
+    rows read later), a rising one squeezed, and a flight that only falls (the release)
+    shows a curvature off by about 3 × readout × its speed over the picture's height."""
+    from scipy.optimize import minimize_scalar
+
+    best = 0.0
+    for _ in range(3):
+        w = 1.0 / (sig**2 + scatter**2)
+
+        def cost(readout, w=w):
+            return _robust_cost(groups, t + readout * rows, y, w)
+
+        found = minimize_scalar(
+            cost, bounds=(0.0, max_readout), method="bounded", options={"xatol": 1e-3 * max_readout}
+        )
+        best = float(found.x)
+        left = joint_fit(groups, t + best * rows, y, sig, 0.0)[3]
+        if abs(left - scatter) <= 0.05 * scatter:
+            break
+        scatter = left
+    w = 1.0 / (sig**2 + scatter**2)
+    gain = _robust_cost(groups, t, y, w) - _robust_cost(groups, t + best * rows, y, w)
+    return best if gain > READOUT_SIGNIFICANCE else 0.0
+
+
+def _robust_cost(groups, t, y, w) -> float:
+    """The robust residual sum (Huber: quadratic within `HUBER` sigma, linear beyond; the
+    weights refined 5 times) of the joint parabola fit (G free) of `groups` on times `t`: a
+    frame taken across an impact (its blur a V) or still in the hand weighs little."""
+    rows = np.concatenate(groups)
+    X = np.zeros((len(rows), 1 + 2 * len(groups)))
+    at = 0
+    for j, g in enumerate(groups):
+        tau = t[g] - np.mean(t[g])
+        X[at : at + len(g), 0] = 0.5 * tau**2
+        X[at : at + len(g), 1 + 2 * j] = 1.0
+        X[at : at + len(g), 2 + 2 * j] = tau
+        at += len(g)
+    w0, z = w[rows], y[rows]
+    wr = w0
+    for _ in range(5):
+        sw = np.sqrt(wr)
+        p, *_ = np.linalg.lstsq(X * sw[:, None], z * sw, rcond=None)
+        u = np.abs(z - X @ p) * np.sqrt(w0)
+        wr = w0 * np.minimum(1.0, HUBER / np.maximum(u, 1e-12))
+    return float(np.sum(np.where(u <= HUBER, u**2, 2.0 * HUBER * u - HUBER**2)))
 
 
 def _solve(groups, t, y, sig, gravity, step, tol, level_spread):
@@ -307,13 +438,16 @@ def _flights(groups, params, t, y, gravity, sigma) -> list[Flight]:
 
 def _impacts(flights, seg_of, t, y, gravity, step, tol, level_spread):
     """Where successive flights meet: (t, y) and the index of the flight before, for flights
-    of successive segments at most `MAX_GAP` frame steps apart whose parabolas meet between them,
+    of successive segments at most `MAX_GAP` frame steps apart (or less than the later
+    flight's frames span: at a high frame rate a bounce hides more frames) whose parabolas
+    meet between them,
     below (image y above) both flights' frames, within `level_spread` of the median level."""
     hits, after = [], []
     for j in range(len(flights) - 1):
         f1, f2 = flights[j], flights[j + 1]
         t_last, t_next = t[f1.frames[-1]], t[f2.frames[0]]
-        if seg_of[j + 1] != seg_of[j] + 1 or t_next - t_last > MAX_GAP * step:
+        span = t[f2.frames[-1]] - t_next  # no whole flight (at least as long) fits in a shorter gap
+        if seg_of[j + 1] != seg_of[j] + 1 or t_next - t_last > max(MAX_GAP * step, span):
             continue
         hit = _meet(f1, f2, gravity)
         lowest = max(np.max(y[f1.frames]), np.max(y[f2.frames]))

@@ -5,15 +5,18 @@ follow the ball (`_video_track`), find its free flights (`_video_flights`), then
 
 - **Scale** from the free-flight curvature: the flights' common second derivative is g in
   px/s², so the scale is g / G (m per source px), with its standard error (and the spread
-  of the flights' own curvatures, where perspective or drag shows).
+  of the flights' own curvatures, where perspective or drag shows). G is taken from the
+  flights that rise and fall where there are two or more (over those, drag and a rolling
+  shutter's shear cancel to first order; a release's fall alone is bent by both).
 - **Cross-check** with the ball's apparent diameter (px, across the motion): with the
   ball's `diameter` (m) given, the two scales must agree within `DIAMETER_TOLERANCE`
   (perspective moves a ball a little, and blur and shading bias its outline by a pixel or
   two; a wrong frame rate or a missed repeat moves g by far more), else the import is
   refused (`ImplausibleRecording`) unless forced.
 - **Contact level** where successive flight parabolas meet (the impacts: at 25-60 fps the
-  few milliseconds of contact fall between frames), interpolated linearly in time between
-  impacts (a ball that drifts towards the camera moves its contact point in the image).
+  few milliseconds of contact fall between frames), a straight line in time fitted to the
+  impacts (a ball that drifts towards the camera moves its contact point in the image
+  steadily; each impact's own level is uncertain by pixels).
 - **Heights** up, in metres: x = (level - y) × scale, the height of the ball's lowest point
   above the contact level (its centre at the impacts marks the level). Frames held in a
   hand before the release, untracked frames, the ball at rest or leaving after the last
@@ -37,7 +40,7 @@ from jaxunilat.internal import InputError
 from ._format import DEFAULT_GRAVITY
 from ._import import ImplausibleRecording, ImportResult, Rejected, check_options, drop_dataset
 from ._video_decode import WORK_SIDE, decode
-from ._video_flights import Flights, find_flights
+from ._video_flights import Flights, find_flights, joint_fit
 from ._video_track import Track, track
 
 #: The scales from g and from the ball's diameter may differ by this fraction at most.
@@ -76,7 +79,9 @@ class VideoTrace:
     clock, s, and image y, px); `diameter_px` (the apparent diameter across the motion,
     median, px) and `diameter_m` (it times the scale); `diameter_given` (m, or None).
 
-    **The clip:** `fps_unique` and `fps_container` (frames/s), `track` (the `Track`:
+    **The clip:** `fps_unique` and `fps_container` (frames/s), `readout` (s, the rolling
+    shutter's readout fitted from the flights, 0 if none shows: each kept frame's time is
+    its time stamp plus `readout` times its position down the sensor's rows), `track` (the `Track`:
     frames, positions in px, per unique frame), `flights` (the `Flights`), `kept` (indices
     into the track of the kept frames), `rejected` (the frames left out, each with its
     reason, times on the video's clock), `notes`, `warnings`, `problems` (why this is not
@@ -100,6 +105,7 @@ class VideoTrace:
     diameter_given: float | None
     fps_unique: float
     fps_container: float
+    readout: float
     track: Track
     flights: Flights
     kept: np.ndarray
@@ -110,7 +116,7 @@ class VideoTrace:
     estimated: tuple[str, ...] = ESTIMATED
 
     def level_at(self, t) -> np.ndarray:
-        """The contact level's image y (px) at video times `t` (s): linear between impacts."""
+        """The contact level's image y (px) at video times `t` (s): a line through the impacts."""
         return _level(self.impacts, np.asarray(t, dtype=float))
 
     def heights_px(self) -> np.ndarray:
@@ -131,9 +137,15 @@ class VideoTrace:
 
 
 def _level(impacts: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """The contact level's image y (px) at times `t` (s): a straight line fitted to the
+    impacts' (t, y) (one impact: its y). Each impact's level is the meeting point of two
+    extrapolated parabolas, uncertain by pixels; a ball drifting towards or away from the
+    camera moves it steadily, so a line follows the drift without passing on each impact's
+    error to the heights of the flights next to it."""
     if len(impacts) == 1:
         return np.full(np.shape(t), impacts[0, 1])
-    return np.interp(t, impacts[:, 0], impacts[:, 1])
+    slope, intercept = np.polyfit(impacts[:, 0], impacts[:, 1], 1)
+    return intercept + slope * t
 
 
 def trace_video(
@@ -186,16 +198,12 @@ def trace_from_track(
         raise InputError(f"{name}: the ball was not found in any frame")
     d_px = float(np.median(d_all))
     tol = max(FIT_TOLERANCE * d_px, FIT_TOLERANCE_PX)
-    blur = np.where(np.isfinite(tr.blur), tr.blur, 0.0)
-    flights = find_flights(
-        tr.t,
-        tr.y,
-        np.hypot(tr.sigma, BLUR_UNCERTAINTY * blur),
-        tr.gravity_px,
-        prominence=PROMINENCE * d_px,
-        tol=tol,
-        level_spread=LEVEL_SPREAD * d_px,
-    )
+    flights = _flights(tr, tr.y, d_px, tol)
+    still = _still_at_release(tr, flights, tol)
+    if still:
+        y = tr.y.copy()
+        y[still] = np.nan
+        flights = _flights(tr, y, d_px, tol)
     if flights is None or not len(flights.impacts):
         what = "no free flight" if flights is None else "no bounce between two flights"
         raise InputError(
@@ -209,9 +217,10 @@ def trace_from_track(
         )
     notes = [tr.repeats.note(), *tr.notes]
     warnings: list[str] = []
-    scale, scale_sigma = _scale(flights, gravity, notes, warnings)
+    scale, scale_sigma, gravity_px = _scale(flights, tr.y, gravity, notes, warnings)
     kept = flights.kept
-    t_kept = tr.t[kept]
+    t_kept = flights.t[kept]
+    _readout_note(flights, notes)
     level = _level(flights.impacts, t_kept)
     x = (level - tr.y[kept]) * scale
     sigma = flights.sigma * scale
@@ -240,7 +249,7 @@ def trace_from_track(
         v0=v0,
         scale=scale,
         scale_sigma=scale_sigma,
-        gravity_px=flights.gravity,
+        gravity_px=gravity_px,
         level_px=float(np.mean(flights.impacts[:, 1])),
         level_drift_px=float(np.ptp(flights.impacts[:, 1])),
         impacts=flights.impacts,
@@ -249,6 +258,7 @@ def trace_from_track(
         diameter_given=diameter,
         fps_unique=tr.repeats.unique_rate,
         fps_container=tr.repeats.container_rate,
+        readout=flights.readout,
         track=tr,
         flights=flights,
         kept=kept,
@@ -268,6 +278,49 @@ def trace_from_track(
     return out
 
 
+def _flights(tr: Track, y: np.ndarray, d_px: float, tol: float) -> Flights | None:
+    """`find_flights` of the track's heights `y` (px; NaN: left out), a rolling shutter looked for."""
+    blur = np.where(np.isfinite(tr.blur), tr.blur, 0.0)
+    return find_flights(
+        tr.t,
+        y,
+        np.hypot(tr.sigma, BLUR_UNCERTAINTY * blur),
+        tr.gravity_px,
+        prominence=PROMINENCE * d_px,
+        tol=tol,
+        level_spread=LEVEL_SPREAD * d_px,
+        rows=tr.frames.sensor_row(tr.x, tr.y),
+        max_readout=1.0 / tr.repeats.unique_rate,
+    )
+
+
+def _still_at_release(tr: Track, flights: Flights | None, tol: float) -> list[int]:
+    """The frames where the ball still sits where the hand held it, if the first flight takes
+    any of them: the still frames before it (within `tol`, at least 2 px, of the median of
+    the last 2-5 tracked frames before the flight, themselves that still) and the flight's
+    own frames before its apex (or half a frame after it: the apex is extrapolated) that are
+    as near. A ball released from rest starts at its apex, so a frame taken just before the
+    release lies on the fall's parabola within a pixel, yet the ball was held; all of them
+    are left out of the flights together (leaving out one lets the held frame before it in)."""
+    if flights is None or not len(flights.flights):
+        return []
+    first = flights.flights[0]
+    before = [i for i in range(int(first.frames[0])) if np.isfinite(tr.y[i])]
+    if len(before) < 2:
+        return []
+    near = max(tol, 2.0)
+    last = before[-5:]
+    x0, y0 = np.median(tr.x[last]), np.median(tr.y[last])
+    if np.max(np.hypot(tr.x[last] - x0, tr.y[last] - y0)) > near:
+        return []
+    step = 1.0 / tr.repeats.unique_rate
+    early = [int(i) for i in first.frames if flights.t[i] < first.apex_t + 0.5 * step]
+    taken = [i for i in early if math.hypot(tr.x[i] - x0, tr.y[i] - y0) <= near]
+    if not taken:
+        return []
+    return [i for i in before + taken if math.hypot(tr.x[i] - x0, tr.y[i] - y0) <= near]
+
+
 def _ratios(flights: Flights) -> np.ndarray:
     times, after = flights.impacts[:, 0], flights.impact_after
     return np.asarray(
@@ -279,14 +332,24 @@ def _ratios(flights: Flights) -> np.ndarray:
     )
 
 
-def _scale(flights: Flights, gravity: float, notes: list[str], warnings: list[str]) -> tuple[float, float]:
-    """m per px from the flights' common curvature G, and its uncertainty: the joint fit's
-    standard error, inflated by sqrt(chi²/dof) where the flights' own curvatures (those of 5
-    frames or more) disagree beyond their errors (perspective, drag, a varying rate)."""
+def _scale(
+    flights: Flights, y: np.ndarray, gravity: float, notes: list[str], warnings: list[str]
+) -> tuple[float, float, float]:
+    """m per px from the flights' common curvature G (px/s²), its uncertainty, and G.
+
+    G comes from the flights that rise and fall (`_two_sided`) where there are two or more:
+    a fall alone (the release's) is bent by drag (less curvature as it speeds up) and a
+    rolling shutter shears it (a readout fitted a little off leaves a few percent), while
+    over a flight that rises and falls both effects cancel to first order; else from all the
+    flights. Its standard error is inflated by sqrt(chi²/dof) where the flights' own
+    curvatures (those of 5 frames or more) disagree beyond their errors (perspective, drag,
+    a varying rate). `y`: the tracked image y of every frame, px."""
     G, sG = flights.gravity, flights.gravity_sigma
-    own = [
-        (f.gravity_alone, f.gravity_alone_sigma) for f in flights.flights if math.isfinite(f.gravity_alone)
-    ]
+    two = _two_sided(flights, y)
+    used = flights.flights if two is None else two[2]
+    if two is not None:
+        G, sG = two[0], two[1]
+    own = [(f.gravity_alone, f.gravity_alone_sigma) for f in used if math.isfinite(f.gravity_alone)]
     if len(own) >= 2:
         chi2 = sum(((g - G) / s) ** 2 for g, s in own) / (len(own) - 1)
         sG *= math.sqrt(max(chi2, 1.0))
@@ -298,12 +361,31 @@ def _scale(flights: Flights, gravity: float, notes: list[str], warnings: list[st
                 "frame rate; the scale is their common fit"
             )
     scale = gravity / G
-    n = sum(len(f.frames) for f in flights.flights)
+    n = sum(len(f.frames) for f in used)
+    which = "flights" if two is None else "flights that rise and fall"
     notes.append(
         f"scale = {scale * 1e3:.5g} mm/px +- {100 * sG / G:.2g}% from the free-flight curvature "
-        f"g = {G:.6g} px/s^2 ({len(flights.flights)} flights, {n} frames, scatter {flights.scatter:.2g} px)"
+        f"g = {G:.6g} px/s^2 ({len(used)} {which}, {n} frames, scatter {flights.scatter:.2g} px)"
     )
-    return scale, scale * sG / G
+    return scale, scale * sG / G, G
+
+
+def _two_sided(flights: Flights, y: np.ndarray):
+    """(G, its standard error, the flights) of a joint fit of the flights with at least two
+    frames on each side of their apex, or None where fewer than two such flights (or fewer
+    than 12 frames) are found."""
+    t = flights.t
+    used = [
+        f
+        for f in flights.flights
+        if np.sum(t[f.frames] < f.apex_t) >= 2 and np.sum(t[f.frames] > f.apex_t) >= 2
+    ]
+    if len(used) < 2 or sum(len(f.frames) for f in used) < 12:
+        return None
+    sig = np.full(len(t), np.nan)
+    sig[flights.kept] = flights.sigma
+    G, sG, *_ = joint_fit([f.frames for f in used], t, y, sig, flights.gravity)
+    return (G, sG, used) if G > 0 else None
 
 
 def _diameter(tr: Track, kept: np.ndarray, d_px: float) -> float:
@@ -340,6 +422,15 @@ def _diameter_check(d_px: float, scale: float, diameter, notes: list[str]) -> li
     ]
 
 
+def _readout_note(flights: Flights, notes: list[str]) -> None:
+    if flights.readout:
+        notes.append(
+            f"rolling shutter: the sensor's rows read out over {flights.readout * 1e3:.3g} ms (fitted from the "
+            "flights, which it shears); each frame's time is its time stamp plus the readout's share at the "
+            "ball's row"
+        )
+
+
 def _level_note(flights: Flights, notes: list[str]) -> None:
     levels = flights.impacts[:, 1]
     text = (
@@ -349,7 +440,7 @@ def _level_note(flights: Flights, notes: list[str]) -> None:
     if len(levels) > 1 and np.ptp(levels) > 2.0 * float(np.median(flights.sigma)):
         text += (
             f"; it moves by {np.ptp(levels):.1f} px over the clip (perspective: the ball drifts towards or away "
-            "from the camera), heights are measured from the level interpolated between impacts"
+            "from the camera), heights are measured from a straight line fitted to the impacts' levels"
         )
     notes.append(text)
 
@@ -392,15 +483,18 @@ def _held(tr: Track, first: int, tol: float) -> set[int]:
 
 def _start_note(tr: Track, flights: Flights, rejected, x0: float, v0: float, notes: list[str]) -> None:
     """How the trace starts: after a release from rest (the first flight's apex falls within
-    2.5 frames before its first frame), mid-fall, or on the way up."""
+    2.5 frames before its first frame, or after the last frame with the ball held still: at
+    a high frame rate the opening hand hides the ball for several frames), mid-fall, or on
+    the way up."""
     first = flights.flights[0]
     i0 = int(flights.kept[0])
-    t_first = float(tr.t[i0])
+    t_first = float(flights.t[i0])
     step = 1.0 / tr.repeats.unique_rate
     held = sum(r.reason.startswith("held") for r in rejected)
+    last_held = max((r.time for r in rejected if r.reason.startswith("held")), default=-math.inf)
     if first.apex_t > t_first:
         notes.append("the first kept frame is before the first flight's apex (the ball thrown up?)")
-    elif i0 > 0 and first.apex_t >= t_first - 2.5 * step:
+    elif i0 > 0 and (first.apex_t >= t_first - 2.5 * step or first.apex_t >= last_held - 0.5 * step):
         notes.append(
             f"release from rest at t = {first.apex_t:.4f} s on the video's clock (the first flight's apex); "
             f"the {i0} unique frame(s) before the first kept one left out "

@@ -1,26 +1,36 @@
 """Following the ball through the unique frames of a clip: one blob per frame, in free flight.
 
-1. **Background:** the per-pixel median of (at most `BACKGROUND_FRAMES`) unique frames.
+1. **Background:** the per-pixel median of (at most `BACKGROUND_FRAMES`) unique frames;
+   after the first pass, along the ball's way, the median of the frames that show the ball
+   elsewhere (`background_without_ball`: a ball resting for half the clip is no background).
 2. **Candidates:** per frame, the connected regions (closed over 3×3, at least `MIN_AREA`
    px) whose contrast exceeds `THRESHOLD` times the frame's median colour distance from the
    background (at least `MIN_CONTRAST` gray levels); the `MAX_CANDIDATES` with the most
    contrast, each with its contrast-weighted centroid, area, core colour and a shadow score
-   (darker than the background with the background's own hue). The first pass takes the
-   colour distance as contrast; the second, once the ball's colour is known, only the part
-   that reads as the ball's coverage (`coverage`), so that a shadow, or a hand of another
-   hue, no longer merges with the ball.
+   (darker than the background with the background's own hue). The first pass takes as
+   contrast the colour distance that no shadow explains (`_unshadowed`: a shadow touching
+   the ball stays out of its blob), on frames at most `VOTE_RATE` a second; the second,
+   once the ball's colour is known, only the part that reads as the ball's coverage
+   (`coverage`: a shadow, or a hand of another hue, no longer merges with the ball), and a
+   blob much larger than its fully covered core (a ball in a hand of nearly its hue) is cut
+   along the core's margin (`_split_cores`).
 3. **Gravity in pixels:** every chain of candidates over five successive frames whose three
    triples move, turn downwards and accelerate alike votes for its vertical acceleration;
-   the votes' peak is the first estimate of g in px/s² (the parabola fits refine it).
+   the votes' peak is the first estimate of g in px/s² (the parabola fits refine it). A clip
+   faster than `VOTE_RATE` frames/s votes on every k-th frame (at 240 frames/s gravity moves
+   the ball by a tenth of a pixel from frame to frame).
 4. **The path:** a second-order Viterbi choice of one candidate (or none) per frame that
    minimises, over the clip, the squared deviation from constant-acceleration motion
    (capped at `MOTION_CAP`), the appearance cost (shadow, size and colour unlike the
    ball's) and `MISSING_COST` per frame without one. In the second pass, three positions
    at rest (held, resting) and a bounce (the floor pushing the ball up) cost less.
-5. **Sub-pixel centre:** the centroid of the ball's coverage around the chosen blob,
-   saturated at `SATURATION`; its uncertainty from the frame's noise; the apparent diameter
-   as the extent of the half-covered pixels across the motion (motion blur stretches the
-   ball along it only).
+5. **Sub-pixel centre:** the centroid of the ball's coverage around the chosen blob, each
+   pixel's coverage read against the ball's own shading near it, saturated at `SATURATION`,
+   the faint halo below `HALO` left out and a highlight enclosed by the ball counted as
+   covered (`measure`); its uncertainty from the frame's noise; the apparent diameter as the
+   extent of the half-covered pixels across the motion (motion blur stretches the ball
+   along it only). With a rolling shutter this is the ball's centre when the row through it
+   was exposed (the trace adds the readout's share to the frame's time).
 
 Coordinates are working-frame pixels (y down) inside this module; `track` returns source
 display pixels.
@@ -41,6 +51,9 @@ from ._video_repeats import Repeats, find_repeats
 
 #: Frames used for the median background, at most.
 BACKGROUND_FRAMES = 61
+#: Where the first pass saw the ball near a pixel in this fraction of its frames or more,
+#: the background there comes from the frames without it (`background_without_ball`).
+BALL_OFTEN = 0.1
 #: The least noise assumed, gray levels (8-bit quantisation: 1/sqrt(12)).
 MIN_NOISE = 0.3
 #: A pixel is foreground when its colour distance exceeds this many times the frame's median.
@@ -51,6 +64,13 @@ MIN_CONTRAST = 10.0
 MIN_AREA = 4
 #: Candidates kept per frame (those with the most contrast).
 MAX_CANDIDATES = 8
+#: The three accelerations of a voting chain agree within 1 px/frame² and this fraction (a
+#: rolling shutter stretches a falling ball's steps and squeezes a rising one's, by tens of
+#: percent at the bottom of a fall; drag bends them a little).
+VOTE_ALIKE = 0.25
+#: Gravity is voted on frames at most this many a second (a faster clip votes on every
+#: k-th frame: `gravity_votes`).
+VOTE_RATE = 60.0
 #: The motion cost of a triple is capped at this (an impact, a glitch).
 MOTION_CAP = 9.0
 #: The cost of a frame with no candidate chosen ...
@@ -68,8 +88,29 @@ SHADOW_COST = 3.0
 #: A pixel counts towards the ball where its change from the background is within this
 #: angle (degrees, in RGB) of the ball's colour's change.
 COLOUR_CONE = 50.0
+#: A shadow darkens the background by at most this fraction.
+SHADOW_DEPTH = 0.6
+#: The ball's own shading darkens its colour by at most this fraction (its shaded side).
+BALL_SHADING = 0.3
+#: The ridge on a shadow's darkening (a fraction of the background's own square norm) that
+#: keeps a ball of the background's hue read as coverage, not as a brighter background.
+SHADOW_RIDGE = 0.1
+#: A blob more than `CORE_SPLIT` times the area of its core (coverage at least `CORE`,
+#: and `CORE_MARGIN` px round it) is cut along the core's margin (`_split_cores`).
+CORE = 0.75
+CORE_MARGIN = 2
+CORE_SPLIT = 2.5
 #: A candidate whose colour differs from the ball's by this many gray levels costs 1.
 COLOUR_SCALE = 25.0
+#: A pixel's coverage is read against the largest within this many px (the ball's shading
+#: near it) ...
+SHADING_REACH = 2
+#: ... taken as at least this (far from the ball, the coverage is noise).
+SHADING_FLOOR = 0.7
+#: Coverage below this counts for nothing, and above it in proportion (the faint halo that
+#: compression and chroma subsampling leave round the ball, and noise, weigh nothing; an edge
+#: profile keeps its middle).
+HALO = 0.2
 #: Coverage at which a pixel counts fully towards the ball's centre (a highlight no more).
 SATURATION = 1.0
 #: The appearance costs (size, colour) are capped at this each.
@@ -81,7 +122,8 @@ class Track:
     """The ball in each unique frame of a clip.
 
     - `frames`, `repeats`: the decoded clip and its repeated frames.
-    - `index`: the unique frames' indices into `frames`; `t`: their times, s (container clock).
+    - `index`: the unique frames' indices into `frames`; `t`: their times, s (container
+      clock; `Repeats.times`: put back on the source's frame grid in a clip with repeats).
     - `x`, `y`: the ball's centre, source display px (y down), NaN where not found.
     - `sigma`: the centre's uncertainty from the frame's noise, px (NaN where not found).
     - `diameter`: the apparent diameter across the motion, px; `blur`: the extent along
@@ -169,43 +211,131 @@ def background(rgb: np.ndarray) -> np.ndarray:
     return np.partition(stack, mid, axis=0)[mid].astype(np.float32)
 
 
+def background_without_ball(rgb: np.ndarray, found, path, bg: np.ndarray) -> np.ndarray:
+    """`bg` recomputed where the ball often is, from the frames where the first pass saw it
+    elsewhere: a ball that rests (or bounces low) near one place for half the clip is in
+    the plain median, hidden there, and a ball over its own ghost reads as partly missing.
+    Each pixel within a ball's radius of the ball's blob (its shadow and blur near it) in
+    `BALL_OFTEN` or more of (at most `BACKGROUND_FRAMES`) frames where the ball was seen
+    takes the median of those of them where it was not near; with fewer than 3 such
+    frames, or where the ball only passes, it keeps `bg`."""
+    seen = np.asarray([i for i, slot in enumerate(path) if slot < len(found[i][0].pos)], dtype=int)
+    if len(seen) < 3:
+        return bg
+    pick = seen[
+        np.unique(np.linspace(0, len(seen) - 1, min(len(seen), BACKGROUND_FRAMES)).round().astype(int))
+    ]
+    radius = max(2.0, math.sqrt(float(np.median([found[i][0].area[path[i]] for i in seen])) / math.pi))
+    m = int(math.ceil(radius)) + 1
+    h, w = bg.shape[:2]
+    covered = np.zeros((len(pick), h, w), dtype=bool)
+    for j, i in enumerate(pick):
+        labels = found[i][1]
+        rs, cs = ndimage.find_objects((labels == path[i] + 1).astype(np.int8))[0]
+        box = (
+            slice(max(0, rs.start - m), min(h, rs.stop + m)),
+            slice(max(0, cs.start - m), min(w, cs.stop + m)),
+        )
+        covered[j][box] = ndimage.distance_transform_edt(labels[box] != path[i] + 1) <= radius
+    rows, cols = np.nonzero(covered.mean(axis=0) >= BALL_OFTEN)
+    free = ~covered[:, rows, cols]
+    count = free.sum(axis=0)
+    enough = count >= 3
+    stack = np.sort(np.where(free[..., None], rgb[pick][:, rows, cols].astype(np.float32), np.inf), axis=0)
+    k = count[enough]
+    lo = np.take_along_axis(stack[:, enough], ((k - 1) // 2)[None, :, None], axis=0)[0]
+    hi = np.take_along_axis(stack[:, enough], (k // 2)[None, :, None], axis=0)[0]
+    out = bg.copy()
+    out[rows[enough], cols[enough]] = 0.5 * (lo + hi)
+    return out
+
+
 def _distance(frame: np.ndarray, bg: np.ndarray) -> np.ndarray:
     """The colour distance of each pixel from the background, 0-441."""
     d = frame.astype(np.float32) - bg
     return np.sqrt(np.einsum("...c,...c->...", d, d))
 
 
+def _unshadowed(frame: np.ndarray, bg: np.ndarray) -> np.ndarray:
+    """The colour distance from the background that no shadow explains, 0-441: each pixel's
+    change less its part along the background's own colour, where that part darkens it by
+    at most `SHADOW_DEPTH` (a shadow keeps the background's hue; a ball that is not the
+    background's colour made darker keeps most of its distance, a black one a part)."""
+    d = frame.astype(np.float32) - bg
+    b = np.maximum(bg, 1.0)
+    beta = np.einsum("...c,...c->...", d, b) / np.einsum("...c,...c->...", b, b)
+    rest = d - np.clip(beta, -SHADOW_DEPTH, 0.0)[..., None] * b
+    return np.sqrt(np.einsum("...c,...c->...", rest, rest))
+
+
 def coverage(pixels: np.ndarray, under: np.ndarray, colour: np.ndarray, noise: float):
-    """The ball's coverage of pixels (0-1.2): the colour distance from the background `under`
-    them over the ball's own (`colour`), where the change from the background points within
-    `COLOUR_CONE` degrees of the ball's (a lit or shaded side of the ball), else 0 (a shadow,
-    a hand of another hue). Also the contrast |colour - background|, gray levels: the
-    coverage's noise is noise / contrast."""
+    """The ball's coverage of pixels (0-1.2) and the contrast it is read with (gray levels).
+
+    Each pixel's change from the background `under` it is split (least squares, in RGB) into
+    a part along the ball's own change (`colour` - background: the coverage α) and a part
+    along the background itself (β: a shadow darkens the background by β < 0): a shadow
+    falling on or next to the ball, or the ball over its own shadow, no longer reads as
+    the ball. β is held at 0 where it would brighten the background, and where the ball is
+    no darker than the background along the background's colour (a white ball on a white
+    wall: a shadow's change points away from the ball's and fails the cone below); a small
+    ridge on β keeps a ball of nearly the background's hue read as coverage. A shadow darkens only the part of the background that the ball
+    leaves uncovered (by `SHADOW_DEPTH` at most) and the ball's own shading darkens it by
+    `BALL_SHADING` at most, so β ≥ -SHADOW_DEPTH (1 - α) - BALL_SHADING α (on that bound
+    where the free split would go beyond it: a dark hand is not a deep shadow behind a
+    covering ball). A pixel counts only where the shadow-corrected change points within
+    `COLOUR_CONE` degrees of the ball's (a lit or shaded side of the ball), else 0 (a hand
+    or an object of another hue). Also the contrast |colour - background|, gray levels: the
+    coverage's noise is about noise / contrast."""
     p = pixels.astype(np.float32) - under
-    c = colour.astype(np.float32) - under
-    cc = np.sqrt(np.maximum(np.einsum("...c,...c->...", c, c), 1.0))
-    pp = np.sqrt(np.einsum("...c,...c->...", p, p))
-    cos = np.einsum("...c,...c->...", p, c) / (cc * np.maximum(pp, 1e-3))
+    c = (colour.astype(np.float32) - under).astype(np.float32)
+    b = np.maximum(under.astype(np.float32), 1.0)
+
+    def dot(u, v):
+        return np.einsum("...c,...c->...", u, v)
+
+    cc, cb, bb = np.maximum(dot(c, c), 1.0), dot(c, b), dot(b, b)
+    cp, bp = dot(c, p), dot(b, p)
+    ridge = SHADOW_RIDGE * bb
+    det = np.maximum(cc * (bb + ridge) - cb * cb, 1e-6)
+    beta = np.where(cb < 0.0, np.minimum((cc * bp - cb * cp) / det, 0.0), 0.0)
+    alpha = (cp - beta * cb) / cc
+    # a shadow darkens only the background the ball leaves uncovered, the ball's own shading
+    # at most BALL_SHADING: beta >= -SHADOW_DEPTH (1 - alpha) - BALL_SHADING alpha
+    slope = SHADOW_DEPTH - BALL_SHADING
+    edge = c + slope * b
+    on_edge = (dot(p + SHADOW_DEPTH * b, edge) / np.maximum(dot(edge, edge), 1.0)).astype(np.float32)
+    bound = beta < -SHADOW_DEPTH + slope * alpha
+    alpha = np.where(bound, on_edge, alpha)
+    beta = np.where(bound, -SHADOW_DEPTH + slope * on_edge, beta)
+    rest = p - beta[..., None] * b
+    rr = np.sqrt(dot(rest, rest))
+    cos = dot(rest, c) / (np.sqrt(cc) * np.maximum(rr, 1e-3))
     ok = cos >= math.cos(math.radians(COLOUR_CONE))
-    return np.where(ok, np.minimum(pp / cc, 1.2), 0.0), cc
+    return np.where(ok, np.clip(alpha, 0.0, 1.2), 0.0), np.sqrt(cc)
 
 
 def candidates(
     frame: np.ndarray, bg: np.ndarray, roi_mask=None, colour=None
 ) -> tuple[_Candidates, np.ndarray, np.ndarray, float]:
     """The candidate blobs of a frame, the label image and contrast map they come from, and
-    the frame's noise (gray levels). The contrast is the colour distance from the background,
-    or, when the ball's `colour` is known, the part of it that reads as the ball's coverage."""
+    the frame's noise (gray levels). The contrast is the colour distance from the background
+    that no shadow explains (`_unshadowed`: a shadow touching the ball is no part of its
+    blob), or, when the ball's `colour` is known, the part of it that reads as the ball's
+    coverage."""
     dist = _distance(frame, bg)
     noise = max(float(np.median(dist[::3, ::3])) / 1.5, MIN_NOISE)
     level = max(1.5 * THRESHOLD * noise, MIN_CONTRAST)
     if colour is not None:
         alpha, contrast = coverage(frame, bg, colour, noise)
         dist = alpha * contrast
+    else:
+        dist = _unshadowed(frame, bg)
     fg = dist > level
     if roi_mask is not None:
         fg &= roi_mask
     fg = ndimage.binary_closing(fg, structure=np.ones((3, 3), bool)) & (dist > 0.5 * level)
+    if colour is not None:
+        fg = _split_cores(fg, alpha)
     labels, n = ndimage.label(fg, structure=np.ones((3, 3), bool))
     flat = labels.ravel()
     w = np.where(fg, dist, 0.0).ravel()
@@ -238,6 +368,24 @@ def candidates(
     core, under = _core_colours(frame, bg, labels, dist, len(ok))
     cands = _Candidates(pos, area[ok], m, core, _shadow_score(core, under))
     return cands, labels, dist, noise
+
+
+def _split_cores(fg: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """`fg` with each blob much larger than its fully covered core (at least `CORE`
+    coverage, with `CORE_MARGIN` px round it) cut in two along the core's margin: a ball
+    held in a hand, or touching it, whose skin reads as partial coverage (a skin colour is
+    a mixture of the ball's and the wall's), becomes a blob of its own. A blob without a
+    core (a ball blurred into a faint streak) or little larger than it stays whole."""
+    labels, n = ndimage.label(fg, structure=np.ones((3, 3), bool))
+    if not n:
+        return fg
+    near = ndimage.binary_dilation(fg & (alpha >= CORE), iterations=CORE_MARGIN) & fg
+    area = np.bincount(labels.ravel(), minlength=n + 1)
+    core = np.bincount(labels[near], minlength=n + 1)
+    split = (core > 0) & (area > CORE_SPLIT * core)
+    split[0] = False
+    cut = split[labels] & ~near
+    return fg & ~(ndimage.binary_dilation(near, structure=np.ones((3, 3), bool)) & cut)
 
 
 def _core_colours(frame, bg, labels, dist, n) -> tuple[np.ndarray, np.ndarray]:
@@ -300,9 +448,42 @@ def _triples(a, b, c, dt1, dt2, step, reach):
 def gravity_votes(cands: list[_Candidates], t: np.ndarray, reach: float) -> float:
     """g in working px/s² (NaN if fewer than 3 frames vote): the peak (5 % bins) of the log
     vertical accelerations of the candidate chains over five successive frames whose three
-    triples are plausible (`_triples`) and accelerate alike (within 1 px + 15 % per frame²)."""
+    triples are plausible (`_triples`) and accelerate alike (within 1 px per frame² and
+    `VOTE_ALIKE`).
+
+    A clip faster than `VOTE_RATE` frames/s votes on every k-th frame (each of the k phases
+    in turn), k making the votes' frames at most `VOTE_RATE` a second: at 240 frames/s a
+    falling ball gains a tenth of a pixel of speed a frame, below what three positions show."""
+    stride = _stride(t)
+    votes, weights = [], []
+    for phase in range(stride):
+        v, w = _votes(cands[phase::stride], t[phase::stride], reach)
+        votes += v
+        weights += w
+    if len(votes) < 3:
+        return math.nan
+    v, w = np.concatenate(votes), np.concatenate(weights)
+    bins = np.arange(v.min() - 0.1, v.max() + 0.15, 0.05)
+    hist, edges = np.histogram(v, bins=bins, weights=w)
+    smooth = np.convolve(hist, [0.25, 0.5, 0.25], mode="same")
+    k = int(np.argmax(smooth))
+    near = np.abs(v - 0.5 * (edges[k] + edges[k + 1])) < 0.1
+    return float(np.exp(np.average(v[near], weights=w[near])))
+
+
+def _stride(t: np.ndarray) -> int:
+    """Every how many frames a clip is looked at so as to see at most `VOTE_RATE` a second."""
     step = float(np.median(np.diff(t)))
+    return max(1, int(math.ceil(1.0 / (VOTE_RATE * step) - 1e-9)))
+
+
+def _votes(cands: list[_Candidates], t: np.ndarray, reach: float) -> tuple[list, list]:
+    """The log vertical accelerations voted by the chains of five frames (`gravity_votes`),
+    one list per voting chain start, and their weights (each start's votes share 1)."""
     n = len(cands)
+    if n < 5:
+        return [], []
+    step = float(np.median(np.diff(t)))
     tri = [None] * n
     for i in range(1, n - 1):
         if len(cands[i - 1].pos) and len(cands[i].pos) and len(cands[i + 1].pos):
@@ -315,21 +496,13 @@ def gravity_votes(cands: list[_Candidates], t: np.ndarray, reach: float) -> floa
         (a1, ok1), (a2, ok2), (a3, ok3) = tri[i], tri[i + 1], tri[i + 2]
         a1, a2, a3 = a1[:, :, :, None, None], a2[None, :, :, :, None], a3[None, None, :, :, :]
         mean = (a1 + a2 + a3) / 3.0
-        tol = (1.0 + 0.15 * mean[..., 1] * step**2) / step**2
+        tol = (1.0 + VOTE_ALIKE * mean[..., 1] * step**2) / step**2
         alike = (np.linalg.norm(a1 - mean, axis=-1) < tol) & (np.linalg.norm(a3 - mean, axis=-1) < tol)
         ok = alike & ok1[:, :, :, None, None] & ok2[None, :, :, :, None] & ok3[None, None, :, :, :]
         if ok.any():
             votes.append(np.log(mean[..., 1][ok]))
             weights.append(np.full(int(ok.sum()), 1.0 / ok.sum()))
-    if len(votes) < 3:
-        return math.nan
-    v, w = np.concatenate(votes), np.concatenate(weights)
-    bins = np.arange(v.min() - 0.1, v.max() + 0.15, 0.05)
-    hist, edges = np.histogram(v, bins=bins, weights=w)
-    smooth = np.convolve(hist, [0.25, 0.5, 0.25], mode="same")
-    k = int(np.argmax(smooth))
-    near = np.abs(v - 0.5 * (edges[k] + edges[k + 1])) < 0.1
-    return float(np.exp(np.average(v[near], weights=w[near])))
+    return votes, weights
 
 
 # -- the path ---------------------------------------------------------------------------------
@@ -428,15 +601,28 @@ def measure(frame, bg, labels, slot, colour, noise) -> tuple[float, float, float
     """Centre (x, y, working px), its uncertainty (px, per axis), diameter across the motion
     (px) and extent along it beyond the diameter (px) of candidate `slot` (0-based).
 
-    The centre is the centroid of the ball's coverage around the blob, saturated at
+    The centre is the centroid of the ball's coverage around the blob (`coverage`), each
+    pixel's coverage read against the ball's own shading near it (the largest coverage
+    within `SHADING_REACH` px, at least `SHADING_FLOOR`: the shaded side of a ball reads
+    less coverage than its lit side, and its edge pixels would weigh less) and saturated at
     `SATURATION` (a pixel the ball covers weighs 1 however brightly lit that part of the
-    ball is; an edge pixel weighs its share). The extents are those of the half-covered
-    pixels along the principal axes of that weight (a disc's extent is its diameter in
-    every direction; motion blur stretches it along the motion only)."""
-    region = ndimage.binary_dilation(labels == slot + 1, iterations=2)
+    ball is; an edge pixel weighs its share); a highlight enclosed by the ball (no ball
+    colour, a hole in the coverage) counts as covered. The extents are those of the
+    half-covered pixels along the principal axes of that weight (a disc's extent is its
+    diameter in every direction; motion blur stretches it along the motion only)."""
+    mask = labels == slot + 1
+    box = ndimage.find_objects(mask.astype(np.int8))[0]
+    box = tuple(slice(max(0, b.start - 2), b.stop + 2) for b in box)
+    region = ndimage.binary_dilation(mask[box], iterations=2)
+    alpha_box, contrast_box = coverage(frame[box], bg[box], colour, noise)
+    shade = ndimage.grey_dilation(alpha_box, size=(2 * SHADING_REACH + 1,) * 2)
+    w_box = np.minimum(alpha_box / (np.maximum(shade, SHADING_FLOOR) * SATURATION), 1.0)
+    w_box = np.clip((w_box - HALO) / (1.0 - HALO), 0.0, 1.0)
+    holes = ndimage.binary_fill_holes(alpha_box >= 0.5) & (alpha_box < 0.5)
+    w_box[holes] = 1.0
     yy, xx = np.nonzero(region)
-    alpha, contrast = coverage(frame[region], bg[region], colour, noise)
-    w = np.minimum(alpha / SATURATION, 1.0)
+    alpha, contrast, w = alpha_box[region], contrast_box[region], w_box[region]
+    yy, xx = yy + box[0].start, xx + box[1].start
     total = w.sum()
     if total < 1.0:
         return (math.nan,) * 5
@@ -467,16 +653,20 @@ def track(frames: Frames, *, colour=None, roi=None) -> Track:
     **Returns:** a `Track`. An `InputError` when no moving ball is found.
     """
     hint = parse_colour(colour)
-    repeats = find_repeats(frames.t, frames.gray)
+    repeats = find_repeats(frames.t, frames.rgb)
     index = repeats.keep
-    t, rgb = frames.t[index], frames.rgb[index]
+    t, rgb = repeats.times, frames.rgb[index]
     bg = background(rgb)
     roi_mask = _roi_mask(roi, frames, bg.shape[:2])
     reach = 0.25 * math.hypot(*bg.shape[:2])
-    # pass 1: blobs unlike the background; the ball's colour and size from the best path
-    found = [candidates(f, bg, roi_mask) for f in rgb]
-    path, gravity = _best_path(found, t, reach, hint, None, None, frames.name)
-    ball = _ball_colour(rgb, found, path, hint)
+    # pass 1: blobs unlike the background; the ball's colour from the best path, on frames
+    # at most VOTE_RATE a second (faster, gravity hardly moves the ball from frame to frame
+    # and a still blob would fit as well as the falling ball)
+    sub = slice(None, None, _stride(t))
+    found = [candidates(f, bg, roi_mask) for f in rgb[sub]]
+    path, gravity = _best_path(found, t[sub], reach, hint, None, None, frames.name)
+    ball = _ball_colour(rgb[sub], found, path, hint)
+    bg = background_without_ball(rgb[sub], found, path, bg)
     # pass 2: blobs that read as the ball's coverage (a shadow or a hand falls away)
     found = [candidates(f, bg, roi_mask, ball) for f in rgb]
     size = _ball_size(found, path=None)

@@ -142,10 +142,11 @@ def plot_video_trace(trace: VideoTrace):
 
     tr, fl = trace.track, trace.flights
     t0, s = trace.time0, trace.scale
+    t = fl.t  # the frames' times on the flights' clock (a rolling shutter's readout added)
     fig = Figure(figsize=(10.0, 6.0), layout="constrained")
     top, bottom = fig.subplots(2, 1, height_ratios=(3, 1), sharex=True)
     for k, f in enumerate(fl.flights):
-        tt = np.linspace(tr.t[f.frames[0]], tr.t[f.frames[-1]], 200)
+        tt = np.linspace(t[f.frames[0]], t[f.frames[-1]], 200)
         for j, after in enumerate(fl.impact_after):
             if after == k:
                 tt = np.append(tt, trace.impacts[j, 0])
@@ -163,11 +164,11 @@ def plot_video_trace(trace: VideoTrace):
     kept[trace.kept] = True
     left = ~kept & tr.found
     if left.any():
-        h = (trace.level_at(tr.t[left]) - tr.y[left]) * s * 1e3
-        top.plot(tr.t[left] - t0, h, "x", color="0.5", ms=5, label="left out")
+        h = (trace.level_at(t[left]) - tr.y[left]) * s * 1e3
+        top.plot(t[left] - t0, h, "x", color="0.5", ms=5, label="left out")
     lost = ~tr.found
     if lost.any():
-        top.plot(tr.t[lost] - t0, np.zeros(lost.sum()), "|", color="0.6", ms=10, label="ball not found")
+        top.plot(t[lost] - t0, np.zeros(lost.sum()), "|", color="0.6", ms=10, label="ball not found")
     top.axhline(0.0, color="0.3", lw=0.6)
     top.set_ylabel("height of the ball's lowest point [mm]")
     top.legend(loc="upper right", fontsize=8)
