@@ -5,6 +5,9 @@ name per solver, so that `simulate` compiles once per model structure (parameter
 y0, t1, dt and tolerances are traced and do not retrace).
 """
 
+import os
+import threading
+
 import numpy as np
 
 import jaxunilat
@@ -54,3 +57,26 @@ def rk4(model, y0, t1, dt, **kwargs):
 def arrays(sol, *names):
     """The named outputs of a Solution as NumPy arrays."""
     return tuple(np.asarray(sol.ys[n]) for n in names)
+
+
+def fifo_errors(read, fifo, timeout: float = 20.0) -> list[str]:
+    """The `ValueError` messages of `read(fifo)` on a FIFO, in a thread: a reader that waits
+    for a writer (a hang) is given an empty one and the test fails."""
+    import pytest
+
+    errors = []
+
+    def run():
+        try:
+            read(fifo)
+        except ValueError as err:
+            errors.append(str(err))
+
+    reader = threading.Thread(target=run, daemon=True)
+    reader.start()
+    reader.join(timeout=timeout)
+    if reader.is_alive():  # it waits for a writer: give it one (an empty one) and fail
+        os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
+        reader.join(timeout=timeout)
+        pytest.fail("reading a FIFO waited for a writer")
+    return errors

@@ -16,10 +16,10 @@ import fractions
 import os
 import struct
 import sys
-import threading
 
 import numpy as np
 import pytest
+from helpers import fifo_errors
 
 from identify import import_wav, read_wav
 from jaxunilat._cli._main import main
@@ -235,21 +235,7 @@ def test_read_audio_keeps_the_channels_when_asked(tmp_path, reference):
 def test_a_fifo_or_a_device_is_refused_without_waiting(tmp_path, capsys):
     fifo = tmp_path / "pipe.wav"
     os.mkfifo(fifo)
-    errors = []
-
-    def read():
-        try:
-            read_wav(fifo)
-        except ValueError as err:
-            errors.append(str(err))
-
-    reader = threading.Thread(target=read, daemon=True)
-    reader.start()
-    reader.join(timeout=20)
-    if reader.is_alive():  # it waits for a writer: give it one (an empty one) and fail
-        os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
-        reader.join(timeout=20)
-        pytest.fail("reading a FIFO waited for a writer")
+    errors = fifo_errors(read_wav, fifo)
     assert len(errors) == 1 and "is a FIFO" in errors[0] and "\n" not in errors[0], errors
     code = main(["import", "audio", str(fifo), "--ball", "pingpong", "--out", str(tmp_path / "o.csv")])
     err = capsys.readouterr().err

@@ -18,12 +18,13 @@ import math
 import os
 import subprocess
 import sys
-import threading
 
 import numpy as np
 import pytest
 
 av = pytest.importorskip("av", reason="PyAV (the video extra) is not installed")
+
+from helpers import fifo_errors  # noqa: E402
 
 from identify import import_video, import_wav, load_dataset  # noqa: E402
 from identify._data._format import MAX_DATA_BYTES, NOISE_RANGE  # noqa: E402
@@ -349,21 +350,7 @@ def test_real_red_ball_soundtrack_is_digital_silence(tmp_path, capsys):
 def test_identify_refuses_a_fifo_without_waiting(tmp_path, capsys):
     fifo = tmp_path / "pipe.csv"
     os.mkfifo(fifo)
-    errors = []
-
-    def read():
-        try:
-            load_dataset(fifo)
-        except ValueError as err:
-            errors.append(str(err))
-
-    reader = threading.Thread(target=read, daemon=True)
-    reader.start()
-    reader.join(timeout=20)
-    if reader.is_alive():  # it waits for a writer: give it one (an empty one) and fail
-        os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
-        reader.join(timeout=20)
-        pytest.fail("reading a FIFO waited for a writer")
+    errors = fifo_errors(load_dataset, fifo)
     assert len(errors) == 1 and "is a FIFO, not a regular file" in errors[0], errors
     code, out, err = _cli(capsys, "identify", fifo)
     assert code == 2 and err.count("\n") == 1 and "is a FIFO" in err, err

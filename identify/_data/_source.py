@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 import stat
 
-from jaxunilat.internal import InputError, printable
+from jaxunilat.internal import InputError, mode_kind, printable
 
 #: A byte count in words for messages: the unit and its size in bytes.
 _UNITS = (("GB", 1e9), ("MB", 1e6), ("kB", 1e3))
@@ -77,20 +77,7 @@ def refuse_special(path) -> None:
 
 def _refuse(name: str, mode: int, hint: str = SAVE_RECORDING) -> None:
     if not stat.S_ISREG(mode):
-        raise InputError(f"{printable(name)}: is a {_special_kind(mode)}, not a regular file; {hint}")
-
-
-def _special_kind(mode: int) -> str:
-    """What a file that is neither regular nor a directory is, in words."""
-    if stat.S_ISCHR(mode):
-        return "character device"
-    if stat.S_ISFIFO(mode):
-        return "FIFO"
-    if stat.S_ISBLK(mode):
-        return "block device"
-    if stat.S_ISSOCK(mode):
-        return "socket"
-    return "special file"
+        raise InputError(f"{printable(name)}: is a {mode_kind(mode)}, not a regular file; {hint}")
 
 
 def read_source(

@@ -44,12 +44,13 @@ def pairs(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     return kappa, k_r
 
 
-def trajectory(kappa, k_r):
-    """One row of the sweep: (x at the save times [m], status, steps) in the event mode."""
+def solve(kappa, k_r, samples: int = SAMPLES):
+    """The throughput scene at (κ [N/m], k_r [N·s/m]) with `samples` save times of x: the
+    event mode's `Solution` (`throw=False`: the status says how it went)."""
     from .._models._ball import Ball
     from .._solver._simulate import simulate
 
-    sol = simulate(
+    return simulate(
         Ball.table1(2, kappa=kappa, k_r=k_r),
         np.asarray(Y0),
         T1,
@@ -57,12 +58,17 @@ def trajectory(kappa, k_r):
         piece_solver=PIECE,
         rtol=TOL,
         atol=TOL,
-        samples=SAMPLES,
+        samples=samples,
         outputs=("x",),
         max_steps=MAX_STEPS,
         max_events=MAX_EVENTS,
         throw=False,
     )
+
+
+def trajectory(kappa, k_r):
+    """One row of the sweep: (x at the save times [m], status, steps) in the event mode."""
+    sol = solve(kappa, k_r)
     return sol.ys["x"], sol.status, sol.num_steps
 
 

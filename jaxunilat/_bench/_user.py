@@ -271,27 +271,11 @@ def _lockstep(samples: int):
     """`jax.jit(jax.vmap(row))` of the throughput scene's rows with `samples` save times
     (traced at its first call: call it with `JAXUNILAT_VMAP=batch` set)."""
     import jax
-    import jax.numpy as jnp
 
-    from .._models._ball import Ball
-    from .._solver._simulate import simulate
-    from ._scale import MAX_EVENTS, MAX_STEPS, PIECE, T1, TOL, Y0
+    from ._scale import solve
 
     def row(kappa, k_r):
-        sol = simulate(
-            Ball.table1(2, kappa=kappa, k_r=k_r),
-            jnp.asarray(Y0),
-            T1,
-            solver="event",
-            piece_solver=PIECE,
-            rtol=TOL,
-            atol=TOL,
-            samples=samples,
-            outputs=("x",),
-            max_steps=MAX_STEPS,
-            max_events=MAX_EVENTS,
-            throw=False,
-        )
+        sol = solve(kappa, k_r, samples)
         return sol.ys["x"], sol.status
 
     return jax.jit(jax.vmap(row))

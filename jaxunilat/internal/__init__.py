@@ -37,6 +37,7 @@ from ._io import (
     bundled_data as bundled_data,
     check_output_dir as check_output_dir,
     check_output_paths as check_output_paths,
+    mode_kind as mode_kind,
     special_kind as special_kind,
     write_atomically as write_atomically,
 )

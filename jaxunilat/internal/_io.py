@@ -44,6 +44,12 @@ def special_kind(path: str | os.PathLike) -> str | None:
         return None
     if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
         return None
+    return mode_kind(mode)
+
+
+def mode_kind(mode: int) -> str:
+    """What a file of `os.stat` mode `mode` that is neither regular nor a directory is, in
+    words: `"character device"`, `"FIFO"`, `"block device"`, `"socket"` or `"special file"`."""
     if stat.S_ISCHR(mode):
         return "character device"
     if stat.S_ISFIFO(mode):
