@@ -13,7 +13,7 @@ def default_data_path() -> str:
     if found:
         return found[0]
     raise InputError(
-        "no DATA given and the bundled data/drop_trace.csv was not found (it ships with the source tree); "
+        "no DATA given and the bundled data/drop_trace.csv was not found (it installs with the package as jaxunilat/_data, and is data/ in a checkout); "
         "pass a data file: jaxunilat identify DATA.csv"
     )
 

@@ -11,8 +11,9 @@ Each entry point is a function `register(commands) -> None`. `commands` is the
 `argparse` subparsers object of `jaxunilat`; `register` adds one parser named as the
 entry point (`commands.add_parser(name, help=..., description=...)`), its arguments, and
 `set_defaults(func=handler)`, where `handler(args) -> int` runs the command and returns
-its exit code. Keep the module light to import (`jaxunilat --help` builds every parser):
-heavy imports go inside the handler.
+its exit code. Keep the module light to import (a command's parser is built when the command
+line names it, and `jaxunilat --help` reads a plain literal `help="..."` of `register`
+without importing it): heavy imports go inside the handler.
 
 **Errors.** A handler raises `UsageError` for arguments that do not go together and
 `InputError` for a value or file the user gave that is invalid (both exit 2; wrap code
