@@ -70,20 +70,16 @@ UNITS = {
     "scale": "",
     "level": "m",
 }
-#: The contact laws a fit can use.
-LAWS = ("kelvin-voigt", "hunt-crossley")
-#: κ and k_r units per law.
-LAW_UNITS = {
-    "kelvin-voigt": {"kappa": "N/m", "k_r": "N*s/m"},
-    "hunt-crossley": {"kappa": "N/m^1.5", "k_r": "N*s/m^2.5"},
-}
+#: The contact laws a fit can use, by name: each law's object owns its closed forms and units.
+LAW_MODELS = {"kelvin-voigt": ju.KelvinVoigt(), "hunt-crossley": ju.HuntCrossley(1.5)}
+LAWS = tuple(LAW_MODELS)
 #: Predicted onsets beyond the observed ones (room for missed bounces in the matching).
 EXTRA_ONSETS = 4
 
 
 def units(law: str) -> dict[str, str]:
     """The report units of every parameter under `law`."""
-    return {**UNITS, **LAW_UNITS[law]}
+    return {**UNITS, **LAW_MODELS[law].units}
 
 
 def applies(name: str, observe: str) -> bool:
@@ -143,7 +139,7 @@ class Problem(eqx.Module):
             drag=jnp.exp(z[2]) if self.has_drag else None,
             lower=walls[0],
             upper=walls[1],
-            law=ju.HuntCrossley(1.5) if self.law == "hunt-crossley" else ju.KelvinVoigt(),
+            law=LAW_MODELS[self.law],
         )
 
     def predict(self, z) -> tuple[Array, Array]:

@@ -42,6 +42,8 @@ import jaxunilat
 from jaxunilat import Status
 from jaxunilat.internal import InputError, check_choice, check_finite, check_range
 
+from ._problem import LAW_MODELS
+
 # -- per-bounce restitution from onset times ------------------------------------------------
 
 #: Newton iterations for g k T = gd(y) + y: from the lower bound max(τ/2, τ − π/2) the
@@ -216,7 +218,7 @@ def bounce_restitution(
 # -- restitution of a contact law ----------------------------------------------------------
 
 #: The contact laws `law_restitution` knows, by name.
-LAWS = {"kelvin-voigt": jaxunilat.KelvinVoigt(), "hunt-crossley": jaxunilat.HuntCrossley(1.5)}
+LAWS = LAW_MODELS  # the fit's laws by name (`_problem.LAW_MODELS`)
 
 #: The simulated horizon in units of the contact's time scale (see `_impact`). A contact
 #: that has not ended by then holds the ball: e = 0, t_c = inf.
