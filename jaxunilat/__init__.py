@@ -6,7 +6,8 @@ rackets with air drag, and a rolling-mill coupling with clearance, with penalty 
 written with Heaviside functions.
 
 The top level holds the core: models, contact laws, Heaviside options, `simulate`, its
-`Solution` and `Status`, observations, `sweep` and `use_loop_kernels`. Studies, figures,
+`Solution` and `Status`, observations, `sweep`, `use_loop_kernels` and
+`use_compilation_cache`. Studies, figures,
 the paper's reproduction and debugging helpers are namespaces: `jaxunilat.analysis`,
 `jaxunilat.plot`, `jaxunilat.paper`, `jaxunilat.debug`.
 
@@ -76,6 +77,7 @@ from ._solver import (  # noqa: E402
     sweep as sweep,
     use_loop_kernels as use_loop_kernels,
 )
+from .internal._compilation_cache import use_compilation_cache as use_compilation_cache  # noqa: E402
 from .internal._io import read_csv as read_csv, write_csv as write_csv  # noqa: E402
 
 #: Names that lived at the top level before the namespaces: each still works, as an
