@@ -191,3 +191,27 @@ def test_json_keys_are_unchanged_by_the_report():
     assert doc["derived"]["restitution"]["stderr"] == 7.426e-6 and doc["wall_s"] == 6.69
     assert doc["iterations"] == 17 and doc["goodness_of_fit"]["p_value"] == 0.0116
     assert math.isclose(doc["correlation"][0][1], 0.999987)
+
+
+def test_the_fit_figure_names_kappa_only_where_the_data_carry_it():
+    """The fit figure's title shows e always, and κ and k_r only where they are
+    identifiable; otherwise it says they are not (never a number the data do not bound)."""
+    from types import SimpleNamespace
+
+    from identify._report._plot import _title
+
+    def fit(identifiable):
+        return SimpleNamespace(
+            parameters={"kappa": {"value": 26609.9}, "k_r": {"value": 0.3626}},
+            derived={"restitution": {"value": 0.935}},
+            law="kelvin-voigt",
+            datasets_data=None,
+            data=SimpleNamespace(path="data/drop_trace.csv"),
+            identifiable=identifiable,
+        )
+
+    carried = _title(fit({"kappa": True, "k_r": True, "restitution": True}))
+    assert "e = 0.9350" in carried and "kappa = 2.661e+04 N/m" in carried and "k_r = 0.3626 N*s/m" in carried
+    withheld = _title(fit({"kappa": False, "k_r": False, "restitution": True}))
+    assert "e = 0.9350" in withheld and "26" not in withheld.split("e = ")[1].split(",", 1)[1]
+    assert "kappa and k_r not identifiable from these data" in withheld

@@ -384,6 +384,8 @@ def _residual_panel(ax, result, key: _Key, *, scale: float, unit: str, xlabel: s
 
 
 def _title(result) -> str:
+    """The figure's title: the data, the law, e, and κ and k_r only where the data carry
+    them (`result.identifiable`); a κ the data do not bound is named as such, not printed."""
     from .._fit._problem import units
 
     kappa, k_r = result.parameters["kappa"], result.parameters["k_r"]
@@ -391,7 +393,12 @@ def _title(result) -> str:
     u = units(result.law)
     files = result.datasets_data or [result.data]
     name = _label(files[0], 0) if len(files) == 1 else f"{len(files)} files"
-    return (
-        f"{name}: {result.law}, kappa = {kappa['value']:.4g} {u['kappa']}, k_r = {k_r['value']:.4g} {u['k_r']}, "
-        f"e = {e['value']:.4f}"
-    )
+    known = result.identifiable or {}
+    shown = [f"e = {e['value']:.4f}"]
+    for key, entry in (("kappa", kappa), ("k_r", k_r)):
+        if known.get(key):
+            shown.append(f"{key} = {entry['value']:.4g} {u[key]}")
+    missing = [key for key in ("kappa", "k_r") if not known.get(key)]
+    if missing:
+        shown.append(f"{' and '.join(missing)} not identifiable from these data")
+    return f"{name}: {result.law}, " + ", ".join(shown)
