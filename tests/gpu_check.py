@@ -51,26 +51,13 @@ def _parse(argv):
     return ap.parse_args(argv)
 
 
-#: The bench's trajectory with 2 save times (built on first use; a module-level object, so
-#: that `sweep` compiles it once).
-trajectory_two_samples = None
+def trajectory_two_samples(kappa, k_r):
+    """The bench's throughput row with 2 save times instead of 2001 (module level, so that
+    `sweep` compiles it once)."""
+    from jaxunilat._bench._scale import solve
 
-
-def _two_samples(trajectory):
-    """`trajectory` (the bench's throughput row) with 2 save times instead of 2001."""
-    import functools
-
-    from jaxunilat._bench import _scale
-
-    @functools.wraps(trajectory)
-    def row(kappa, k_r):
-        saved, _scale.SAMPLES = _scale.SAMPLES, 2
-        try:
-            return trajectory(kappa, k_r)
-        finally:
-            _scale.SAMPLES = saved
-
-    return row
+    sol = solve(kappa, k_r, samples=2)
+    return sol.ys["x"], sol.status, sol.num_steps
 
 
 def main(argv=None) -> int:
@@ -173,9 +160,6 @@ def main(argv=None) -> int:
             row["all_at_once_bytes"] = fixed + args.n_big * sum(per_row)
         rows.append(row)
     # The outputs' cost under vmap: the same rows with 2 save times instead of 2001.
-    global trajectory_two_samples
-    if trajectory_two_samples is None:
-        trajectory_two_samples = _two_samples(trajectory)
     kappa, k_r = pairs(args.n)
     jax.block_until_ready(sweep(trajectory_two_samples, kappa, k_r))
     walls = []

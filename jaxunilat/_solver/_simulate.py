@@ -611,77 +611,33 @@ def simulate(
             "lost; call jax.config.update('jax_enable_x64', True). float32 input arrays are fine: "
             "simulate casts them to float64."
         )
-    options = dict(
-        solver=solver,
-        dt=dt,
-        allow_coarse_dt=allow_coarse_dt,
-        rtol=rtol,
-        atol=atol,
-        max_steps=max_steps,
-        max_events=max_events,
-        dtmax=dtmax,
-        piece_solver=piece_solver,
-        flight=flight,
-        autodiff=autodiff,
-        ts=ts,
-        samples=samples,
-        outputs=outputs,
-        throw=throw,
-    )
-    if _is_concrete_tree((model, y0)):
-        # A concrete single call is latency-bound: on the host CPU where the default backend
-        # is an accelerator (`internal.on_host`; the user's own placement wins).
-        with on_host():
-            return _simulate_checked(model, y0, t_span, **options)
-    return _simulate_checked(model, y0, t_span, **options)
-
-
-def _simulate_checked(
-    model,
-    y0,
-    t_span,
-    *,
-    solver,
-    dt,
-    allow_coarse_dt,
-    rtol,
-    atol,
-    max_steps,
-    max_events,
-    dtmax,
-    piece_solver,
-    flight,
-    autodiff,
-    ts,
-    samples,
-    outputs,
-    throw,
-) -> Solution:
-    """`simulate` after its first checks: the rest of the validation, then the solve."""
-    outputs = _check_outputs(model, outputs)
-    y0 = _check_y0(model, y0)
-    t0, t1 = _time_span(t_span)
-    span = t1 - t0  # before the save times put t0 and t1 on the device
-    t0, t1, ts = _save_times(t0, t1, ts, samples, len(outputs))
-    if solver == "event":
-        _check_event_mode(model, max_events)
-    settings = make_settings(
-        solver,
-        span,
-        dt=dt,
-        rtol=rtol,
-        atol=atol,
-        max_steps=max_steps,
-        max_events=max_events,
-        dtmax=dtmax,
-        piece_solver=piece_solver,
-        flight=flight,
-        autodiff=autodiff,
-        allow_coarse_dt=allow_coarse_dt,
-    )
-    if solver == "rk4" and not allow_coarse_dt:
-        _check_rk4_step(model, dt, y0)
-    return _run(model, y0, t0, t1, ts, settings, outputs, bool(throw))
+    # A concrete single call is latency-bound: on the host CPU where the default backend is
+    # an accelerator (`internal.on_host`; the user's own placement wins).
+    with on_host() if _is_concrete_tree((model, y0)) else contextlib.nullcontext():
+        outputs = _check_outputs(model, outputs)
+        y0 = _check_y0(model, y0)
+        t0, t1 = _time_span(t_span)
+        span = t1 - t0  # before the save times put t0 and t1 on the device
+        t0, t1, ts = _save_times(t0, t1, ts, samples, len(outputs))
+        if solver == "event":
+            _check_event_mode(model, max_events)
+        settings = make_settings(
+            solver,
+            span,
+            dt=dt,
+            rtol=rtol,
+            atol=atol,
+            max_steps=max_steps,
+            max_events=max_events,
+            dtmax=dtmax,
+            piece_solver=piece_solver,
+            flight=flight,
+            autodiff=autodiff,
+            allow_coarse_dt=allow_coarse_dt,
+        )
+        if solver == "rk4" and not allow_coarse_dt:
+            _check_rk4_step(model, dt, y0)
+        return _run(model, y0, t0, t1, ts, settings, outputs, bool(throw))
 
 
 #: Checks that depend only on static things (the model's class, `outputs`, the event
