@@ -31,9 +31,9 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))  # the repository root: `identify` and `jaxunilat`
 
 import jax  # noqa: E402
+from jaxunilat.identify._data import Dataset, format_dataset, load_dataset, write_dataset  # noqa: E402
 
 import jaxunilat  # noqa: E402
-from identify._data import Dataset, format_dataset, load_dataset, write_dataset  # noqa: E402
 
 #: The seed; each file draws from its own child stream `SeedSequence(SEED).spawn(4)[i]`.
 SEED = 20261122

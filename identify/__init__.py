@@ -1,101 +1,87 @@
-"""identify: fit contact stiffness κ and damping k_r to rebound data with jaxunilat.
+"""jaxunilat.identify: fit contact stiffness κ and damping k_r to rebound data.
 
 The identification of [K90 §6]: bounce data (position traces, impact times, apex
-heights) in, κ and k_r with honest uncertainty out.
+heights) in, κ and k_r with honest uncertainty out. Import it as
+`from jaxunilat import identify`; it is a subpackage of jaxunilat (its source lives in
+the repository's top-level `identify/` folder), so nothing named `identify` is
+installed beside jaxunilat and PyPI's `identify` (a pre-commit dependency) can share an
+environment with it.
 
-Note: PyPI's `identify` (a pre-commit dependency) has the same import name; install
-jaxunilat in a dedicated virtual environment.
+Each public name is imported from its module when first used, so that the command line's
+`jaxunilat identify --help` imports no JAX, optax or fit.
 """
 
-import jaxunilat as _jaxunilat  # noqa: F401  (enables float64)
+import importlib
 
-from . import plot as plot  # noqa: E402
-from ._apply._export import (  # noqa: E402
-    DEFAULT_IMPEDANCE as DEFAULT_IMPEDANCE,
-    MujocoContact as MujocoContact,
-    mujoco_contact as mujoco_contact,
-)
-from ._apply._qualify import (  # noqa: E402
-    DEFAULT_DRAG as DEFAULT_DRAG,
-    DEFAULT_SAMPLES as DEFAULT_SAMPLES,
-    ITTF_DROP as ITTF_DROP,
-    ITTF_MASS as ITTF_MASS,
-    ITTF_MAX as ITTF_MAX,
-    ITTF_MIN as ITTF_MIN,
-    QualifyResult as QualifyResult,
-    qualify as qualify,
-    qualify_fit as qualify_fit,
-    rebound_height as rebound_height,
-)
-from ._data._balls import (  # noqa: E402
-    AIR_DENSITY as AIR_DENSITY,
-    BALLS as BALLS,
-    SPHERE_DRAG_COEFFICIENT as SPHERE_DRAG_COEFFICIENT,
-    BallPreset as BallPreset,
-    BallSpec as BallSpec,
-    ball_spec as ball_spec,
-    sphere_drag as sphere_drag,
-)
-from ._data._format import (  # noqa: E402
-    Dataset as Dataset,
-    load_dataset as load_dataset,
-    write_dataset as write_dataset,
-)
-from ._data._import import (  # noqa: E402
-    ImplausibleRecording as ImplausibleRecording,
-    ImportResult as ImportResult,
-    RatioChain as RatioChain,
-    Rejected as Rejected,
-    bounce_problems as bounce_problems,
-    ratio_chain as ratio_chain,
-)
-from ._data._import_audio import (  # noqa: E402
-    OnsetDetection as OnsetDetection,
-    WavAudio as WavAudio,
-    detect_onsets as detect_onsets,
-    import_wav as import_wav,
-    read_wav as read_wav,
-)
-from ._data._import_phyphox import import_phyphox as import_phyphox  # noqa: E402
-from ._data._import_video import import_video as import_video  # noqa: E402
-from ._fit._problem import NUISANCE as NUISANCE, PARAMETERS as PARAMETERS  # noqa: E402
-from ._fit._restitution import (  # noqa: E402
-    BounceRestitution as BounceRestitution,
-    bounce_restitution as bounce_restitution,
-    hunt_crossley_from_restitution as hunt_crossley_from_restitution,
-    law_contact_time as law_contact_time,
-    law_restitution as law_restitution,
-)
-from ._pipeline import (  # noqa: E402
-    METHODS as METHODS,
-    default_optimizer as default_optimizer,
-    fit as fit,
-)
-from ._report._result import FitResult as FitResult  # noqa: E402
+import jaxunilat as _jaxunilat  # noqa: F401  (float64, before any JAX import)
 
-#: The figures' old top-level names, kept one release as deprecated aliases of `identify.plot`.
-_MOVED_TO_PLOT = (
-    "plot_detection",
-    "plot_fit",
-    "plot_restitution",
-    "plot_restitution_of_fit",
-    "plot_table_import",
-)
+#: The namespaces (subpackages), imported when first used.
+_NAMESPACES = ("plot",)
+#: Each public name, and the module of this package that defines it.
+_PUBLIC = {
+    "DEFAULT_IMPEDANCE": "._apply._export",
+    "MujocoContact": "._apply._export",
+    "mujoco_contact": "._apply._export",
+    "DEFAULT_DRAG": "._apply._qualify",
+    "DEFAULT_SAMPLES": "._apply._qualify",
+    "ITTF_DROP": "._apply._qualify",
+    "ITTF_MASS": "._apply._qualify",
+    "ITTF_MAX": "._apply._qualify",
+    "ITTF_MIN": "._apply._qualify",
+    "QualifyResult": "._apply._qualify",
+    "qualify": "._apply._qualify",
+    "qualify_fit": "._apply._qualify",
+    "rebound_height": "._apply._qualify",
+    "AIR_DENSITY": "._data._balls",
+    "BALLS": "._data._balls",
+    "SPHERE_DRAG_COEFFICIENT": "._data._balls",
+    "BallPreset": "._data._balls",
+    "BallSpec": "._data._balls",
+    "ball_spec": "._data._balls",
+    "sphere_drag": "._data._balls",
+    "Dataset": "._data._format",
+    "load_dataset": "._data._format",
+    "write_dataset": "._data._format",
+    "ImplausibleRecording": "._data._import",
+    "ImportResult": "._data._import",
+    "RatioChain": "._data._import",
+    "Rejected": "._data._import",
+    "bounce_problems": "._data._import",
+    "ratio_chain": "._data._import",
+    "OnsetDetection": "._data._import_audio",
+    "WavAudio": "._data._import_audio",
+    "detect_onsets": "._data._import_audio",
+    "import_wav": "._data._import_audio",
+    "read_wav": "._data._import_audio",
+    "import_phyphox": "._data._import_phyphox",
+    "import_video": "._data._import_video",
+    "NUISANCE": "._fit._problem",
+    "PARAMETERS": "._fit._problem",
+    "BounceRestitution": "._fit._restitution",
+    "bounce_restitution": "._fit._restitution",
+    "hunt_crossley_from_restitution": "._fit._restitution",
+    "law_contact_time": "._fit._restitution",
+    "law_restitution": "._fit._restitution",
+    "METHODS": "._pipeline",
+    "default_optimizer": "._pipeline",
+    "fit": "._pipeline",
+    "FitResult": "._report._result",
+    "Estimate": "._fit._estimate",
+}
+__all__ = sorted([*_NAMESPACES, *_PUBLIC])
 
 
 def __getattr__(name: str):
-    """`identify.plot_fit` and the other figures: deprecated aliases of `identify.plot.*`."""
-    if name in _MOVED_TO_PLOT:
-        import warnings
-
-        warnings.warn(
-            f"identify.{name} is deprecated and will be removed in the next release; use identify.plot.{name}",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        return getattr(plot, name)
-    raise AttributeError(f"module 'identify' has no attribute {name!r}")
+    """A public name, imported from its module when first used (`_PUBLIC`), or a namespace."""
+    if name in _NAMESPACES:
+        value = importlib.import_module(f".{name}", __name__)
+    elif name in _PUBLIC:
+        value = getattr(importlib.import_module(_PUBLIC[name], __name__), name)
+    else:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    globals()[name] = value
+    return value
 
 
 def __dir__() -> list[str]:
-    return sorted([*globals(), *_MOVED_TO_PLOT])
+    return sorted({*globals(), *__all__})

@@ -1,11 +1,11 @@
 """identify's rows in `jaxunilat bench`: the fits of the bundled data sets, and a cold
 joint fit of 30 throws from the command line.
 
-The bench finds them through the entry-point group `jaxunilat.bench` (`pyproject.toml`):
+The bench names them in its `ROWS` (`jaxunilat/_bench/_main.py`):
 `identification` and `joint_fit` are each called with the bench's size settings (a
 `jaxunilat.bench.Size`: `name`, `identify_sets`, `identify_runs`, `joint_files`) and a
 `log` function (one printed line per call), and return their row of `bench.json`.
-jaxunilat never imports this package; this module uses identify's public names and
+jaxunilat's engine never imports this package; this module uses identify's public names and
 `jaxunilat.bench`.
 
 The joint fit's workload (`write_throws`): `JOINT_FILES` synthetic drops of one ball (one
@@ -36,7 +36,7 @@ import time
 
 import numpy as np
 
-import identify
+from jaxunilat import identify
 
 #: The workload: this many files, each with this many onsets.
 JOINT_FILES = 30
@@ -60,7 +60,7 @@ def identification(size, log) -> dict:
     compilation, the fastest later one warm."""
     if size.identify_sets == 0:
         return {"status": f"skipped at size {size.name}", "rows": []}
-    from jaxunilat.internal import bundled_data
+    from jaxunilat._internal import bundled_data
 
     paths = fit_sets(bundled_data("*.csv"))
     if not paths:
@@ -99,8 +99,8 @@ def _fit_row(path: str, runs: int) -> dict:
         "fit": "identify.fit(data" + (", nuisance=('offset',))" if nuisance else ")"),
         "first_s": walls[0],
         "warm_s": min(walls[1:]) if len(walls) > 1 else None,
-        "kappa": res.parameters["kappa"]["value"],
-        "k_r": res.parameters["k_r"]["value"],
+        "kappa": res.params["kappa"].value,
+        "k_r": res.params["k_r"].value,
         "converged": bool(res.converged),
     }
 

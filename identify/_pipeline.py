@@ -3,10 +3,11 @@
 The pipeline over the layers below it: arguments (`identify._fit._options`), the
 set-up (`_fit._setup`), the stages (`_fit._stages`: starts, growing windows, robust
 pass, final pass; `_fit._alone`: starts from each file's own solution), then the
-summary (`identify._report._summary`: Gauss–Newton covariance with honest noise,
-per-file tables, the per-file "alone" restitution, the hold-out prediction), the
-optional profile of κ (`_fit._profile`) and the closed-form gate (`_fit._plausible`),
-with one restart from the closed form where the gate finds a wrong basin.
+summary (`_fit._summary`: Gauss–Newton covariance with honest noise, per-file tables,
+the per-file "alone" restitution, the hold-out prediction), the optional profile of κ
+(`_fit._profile`) and the closed-form gate (`_fit._plausible`), with one restart from
+the closed form where the gate finds a wrong basin. Each step returns a new frozen
+`FitOutcome`; the `FitResult` (`identify._report._result`) is built once, at the end.
 
 The Jacobian's columns are central differences of event-located runs (step 1e-4 in
 log κ, log k_r, log k; scaled steps for x0, v0) inside the one compiled call; the time
@@ -25,17 +26,16 @@ import math
 import os
 import time
 
-import equinox as eqx
-import jax.numpy as jnp
 import numpy as np
 import optax
 
-from jaxunilat.internal import check_choice, keep_placement, latency_bound
+import jaxunilat as ju
+from jaxunilat import NoClosedFormError
+from jaxunilat._internal import keep_placement, latency_bound
 
 from ._fit import _plausible as plausible, _stages as stages
-from ._fit._alone import alone_restitution, alone_starts
+from ._fit._alone import alone_starts
 from ._fit._initial import CONTACT_TIME_GUESS
-from ._fit._joint import Layout
 from ._fit._options import (
     METHODS,
     Options,
@@ -48,13 +48,14 @@ from ._fit._options import (
     shift_clocks,
     shift_offset_arguments,
 )
-from ._fit._problem import LAWS, PARAMETERS
+from ._fit._outcome import CONTACT, FitOutcome, InitialGuess, Restart
+from ._fit._problem import LAW_MODELS, LAWS, law_name
 from ._fit._profile import check_profile_minimum, profile_closes, profile_kappa
-from ._fit._restitution import hunt_crossley_from_restitution
+from ._fit._restitution import inverse_by_simulation
 from ._fit._robust import THRESHOLD, Rows
 from ._fit._setup import build, point_at, start_points
+from ._fit._summary import restore_clocks, summarize_fit, with_alone
 from ._report._result import FitResult
-from ._report._summary import CONTACT, summarize_fit
 
 __all__ = ["METHODS", "default_optimizer", "fit"]
 
@@ -77,7 +78,7 @@ def fit(
     profile: bool = False,
     rel_halfwidth: float = 0.25,
     progress: bool = False,
-    law: str = "kelvin-voigt",
+    law: str | ju.AbstractContactLaw = "kelvin-voigt",
     keep_outliers: bool = False,
     outlier_threshold: float = THRESHOLD,
     holdout: float = 0.0,
@@ -113,7 +114,9 @@ def fit(
     - `progress`: show a progress bar over the starts (on stderr).
     - `law`: `"kelvin-voigt"` (the paper's linear spring and damper), `"hunt-crossley"`
       (F = κδ^1.5 + k_r δ^1.5 δ̇: restitution falling with impact speed) or `"auto"`
-      (fit both, report χ², AIC and BIC side by side, keep the lower BIC).
+      (fit both, report χ², AIC and BIC side by side, keep the lower BIC); or the law
+      object itself (`jaxunilat.HuntCrossley(1.5)`), found in identify's law table
+      (`_fit._problem.LAW_MODELS`, where a new law is one line).
     - `keep_outliers`: skip the robust pass; every row is fitted by least squares.
     - `outlier_threshold`: rows beyond this many robust residual scales are excluded.
     - `holdout`: fit the first (1 − holdout) of each file's rows and predict the rest
@@ -122,7 +125,8 @@ def fit(
       Jacobians through the event mode: a few solves for κ and k_r, and a quick
       compile) or `"reverse"` (`jax.grad`).
 
-    **Returns:** a `FitResult` (`.report()`, `.to_json_dict()`, `.parameters`, …).
+    **Returns:** a frozen `FitResult` (`.params["kappa"].value`, `.report()`,
+    `.to_json_dict()`, …).
     """
     began = time.perf_counter()
     datasets = load_all(data)
@@ -137,21 +141,20 @@ def fit(
         progress=progress, keep_outliers=keep_outliers, outlier_threshold=outlier_threshold, holdout=holdout,
         gradient=gradient,
     )  # fmt: skip
-    check_choice("law", law, (*LAWS, "auto"))
+    law = law_name(law)
     initial, bounds = check_start(initial, bounds)
     opts = dataclasses.replace(opts, bounds=bounds, tol=tol)
     laws = LAWS if law == "auto" else (law,)
-    result = _chosen(_fit_laws(datasets, laws, opts, initial), law, offset_note)
-    plausible.apply(result)
-    if plausible.wrong_basin(result):
-        result = _from_closed_form(result, datasets, laws, law, opts, initial, offset_note)
+    outcome = plausible.gate(_chosen(_fit_laws(datasets, laws, opts, initial), law, offset_note))
+    if plausible.wrong_basin(outcome):
+        outcome = _from_closed_form(outcome, datasets, laws, law, opts, initial, offset_note)
     if any(clocks):
-        _restore_clocks(result, originals, clocks)
-    result.wall_s = time.perf_counter() - began
-    return result
+        outcome = restore_clocks(outcome, originals, clocks)
+    fields = {f.name: getattr(outcome, f.name) for f in dataclasses.fields(FitOutcome)}
+    return FitResult(**{**fields, "wall_s": time.perf_counter() - began})
 
 
-def _chosen(fitted: dict, law: str, offset_note: str | None) -> FitResult:
+def _chosen(fitted: dict, law: str, offset_note: str | None) -> FitOutcome:
     """The law of `fitted` (`_fit_laws`) with the lowest BIC on the rows every law used,
     finished (its files' "alone" e), with the laws' comparison and the offset's note."""
     results = {name: r for name, (r, _) in fitted.items()}
@@ -160,15 +163,14 @@ def _chosen(fitted: dict, law: str, offset_note: str | None) -> FitResult:
     chosen = min(results, key=lambda n: comparison[n]["bic"])
     result, finish = fitted[chosen]
     if finish is not None:
-        finish()
-    result.laws = comparison
-    result.law_choice = "auto (lowest BIC)" if law == "auto" else "given"
-    if offset_note:
-        result.notes.append(offset_note)
-    return result
+        result = finish()
+    result = dataclasses.replace(
+        result, laws=comparison, law_choice="auto (lowest BIC)" if law == "auto" else "given"
+    )
+    return result.noted(offset_note) if offset_note else result
 
 
-def _from_closed_form(first: FitResult, datasets, laws, law, opts, initial, offset_note) -> FitResult:
+def _from_closed_form(first: FitOutcome, datasets, laws, law, opts, initial, offset_note) -> FitOutcome:
     """The fit again from the closed form, after `first` landed in a wrong basin
     (`plausible.wrong_basin`): one start at the closed-form e, its release and clock
     settled with the contact held there, on the flights' log ratios wherever the onsets are
@@ -176,25 +178,23 @@ def _from_closed_form(first: FitResult, datasets, laws, law, opts, initial, offs
     it does too, `first` stands, with its reasons and a note (a real contradiction is not
     hidden: the command line exits 3)."""
     again = dataclasses.replace(opts, from_closed_form=True, starts=1, progress=False)
-    second = _chosen(_fit_laws(datasets, laws, again, initial), law, offset_note)
-    plausible.apply(second)
-    e_first = first.derived["restitution"]["value"]
-    e_second = second.derived["restitution"]["value"]
-    restart = {"first_restitution": e_first, "reasons": list(first.contradictions), "accepted": False}
+    second = plausible.gate(_chosen(_fit_laws(datasets, laws, again, initial), law, offset_note))
+    e_first = first.derived["restitution"].value
+    e_second = second.derived["restitution"].value
+    restart = Restart(first_restitution=e_first, reasons=first.contradictions, accepted=False)
     if second.contradictions:
-        first.restart = restart
-        first.notes.append(
+        return dataclasses.replace(first, restart=restart).noted(
             f"restarted from the closed form after the fit (e = {e_first:.4f}) contradicted it: the restart "
             f"(e = {e_second:.4f}) contradicts it too"
         )
-        return first
-    second.restart = {**restart, "accepted": True}
-    second.simulations += first.simulations
-    second.notes.append(
+    return dataclasses.replace(
+        second,
+        restart=dataclasses.replace(restart, accepted=True),
+        simulations=second.simulations + first.simulations,
+    ).noted(
         f"the first fit landed in a wrong basin (e = {e_first:.4f}, contradicted by the flights' closed form); "
         f"restarted from the closed form: e = {e_second:.4f}, which the closed form does not contradict"
     )
-    return second
 
 
 def _fit_laws(datasets, laws: tuple[str, ...], opts: Options, initial: dict) -> dict:
@@ -232,8 +232,8 @@ def _fit_laws(datasets, laws: tuple[str, ...], opts: Options, initial: dict) -> 
 def _fit_law(setup, opts: Options):
     """Every stage for one contact law: starts, windows, robust pass, final pass, summary.
 
-    Returns the `FitResult` and `finish`: None, or (with `opts.defer_alone` and several
-    files) the call that adds each file's "alone" e to it (`_fill_alone`)."""
+    Returns the `FitOutcome` and `finish`: None, or (with `opts.defer_alone` and several
+    files) the call that returns it with each file's "alone" e (`_summary.with_alone`)."""
     began = time.perf_counter()
     rows = Rows.make(setup.n_rows, opts.holdout)
     trends = stages.speed_trends(setup)
@@ -268,28 +268,28 @@ def _fit_law(setup, opts: Options):
             fitted = stages.final_pass(ratio, best, rows, opts)
             onsets = stages.onset_point(setup, fitted, best)
             best, final = fitted, ratio.with_evaluator(prior=False)
-    initial = dict(restitution=e0, contact_time=CONTACT_TIME_GUESS, source=e_source)
+    initial = InitialGuess(restitution=e0, contact_time=CONTACT_TIME_GUESS, source=e_source)
     result = summarize_fit(
         final, best, rows, opts, runs=runs, initial=initial, robust_scale=scale, onsets=onsets
     )
-    _note_trends(result, setup, trends, from_start)
+    result = _note_trends(result, setup, trends, from_start)
     if from_start:
-        _judge_law(result, stages.closed_scatter(setup, rows))
-    _note_restarts(result, setup, restarts)
+        result = _judge_law(result, stages.closed_scatter(setup, rows))
+    result = _note_restarts(result, setup, restarts)
     confirm = any(result.identifiable[name] for name in CONTACT)
     if setup.layout.index[0, 0] in setup.free and (opts.profile or confirm):
         # Asked for, or to confirm an identifiable κ, k_r or t_c: the Gauss–Newton interval
         # is local and linear (a t_c stuck at the steering prior's centre had ±10%), and a κ
         # whose profile stays flat on one side is not what the data carry.
-        result.profile = profile_kappa(final, best, rows, result, opts, points=13 if opts.profile else 7)
-        check_profile_minimum(result, best, setup)
+        profile = profile_kappa(final, best, rows, result, opts, points=13 if opts.profile else 7)
+        result = check_profile_minimum(dataclasses.replace(result, profile=profile), best, setup)
         why = profile_closes(result.profile)
         if why is not None:
-            result.withhold(CONTACT, why)
-    result.wall_s = time.perf_counter() - began
+            result = result.withhold(CONTACT, why)
+    result = dataclasses.replace(result, wall_s=time.perf_counter() - began)
     finish = None
     if opts.defer_alone and setup.layout.n_files > 1:
-        finish = functools.partial(_fill_alone, result, final, best, rows, opts)
+        finish = functools.partial(with_alone, result, final, best, rows, opts)
     return result, finish
 
 
@@ -322,7 +322,7 @@ def _scatter_from_start(setup, candidates, own_starts, rows, opts):
 LAW_SCATTER_MARGIN = 0.001
 
 
-def _judge_law(result, flights: dict) -> None:
+def _judge_law(result: FitOutcome, flights: dict) -> FitOutcome:
     """A misfit verdict where the fit's log-ratio rows scatter far more than the flights'
     own per-bounce e (`stages.closed_scatter`, about a constant e): the law's e(v) follows
     the data worse than a constant e does (Hunt–Crossley's e, which falls as the speed
@@ -330,38 +330,39 @@ def _judge_law(result, flights: dict) -> None:
     the ball's scatter. Only for a law whose e depends on the speed: Kelvin–Voigt's e is
     constant, so an excess there is not the law's e(v) (on short real throws it was the
     first flight against a stated release height, 1.8% against 0.3% on 3 flights)."""
-    if result.law == "kelvin-voigt":
-        return
+    if not result.law_model.restitution_depends_on_speed:
+        return result
     noise = result.noise or {}
     fitted, own = noise.get("restitution_scatter"), max((s for s, _ in flights.values()), default=None)
     if fitted is None or own is None or noise.get("verdict") == "misfit":
-        return
-    if fitted > 2.0 * own + LAW_SCATTER_MARGIN:
-        result.noise = {
+        return result
+    if fitted <= 2.0 * own + LAW_SCATTER_MARGIN:
+        return result
+    return result.nothing_identifiable(
+        noise={
             **noise,
             "verdict": "misfit",
             "text": noise["text"]
             + f"; but the flights' own e scatter by only {own:.2%} (closed form, about a constant "
             f"e): the {result.law} law follows the data's e worse than a constant e does (compare laws: --law auto)",
         }
-        result.identifiable = {name: False for name in result.identifiable}
+    )
 
 
-def _note_trends(result, setup, trends, from_start: bool) -> None:
+def _note_trends(result: FitOutcome, setup, trends, from_start: bool) -> FitOutcome:
     """Each file's trend of e with impact speed: `result.trends` and a note; and the note
     that the fit used the flights' log ratios from its first stage."""
-    result.trends = [
-        {"file": f, "data": d.path, **t.to_json(d.num_rows)}
-        for f, (d, t) in enumerate(zip(setup.datasets, trends, strict=True))
-        if t is not None
-    ]
-    for f, (d, trend) in enumerate(zip(setup.datasets, trends, strict=True)):
-        if trend is not None:
-            result.notes.append(
-                trend.note(os.path.basename(d.path) if d.path else f"data set {f + 1}", d.num_rows)
-            )
+    pairs = [(f, d, t) for f, (d, t) in enumerate(zip(setup.datasets, trends, strict=True)) if t is not None]
+    result = dataclasses.replace(
+        result, trends=[{"file": f, "data": d.path, **t.to_json(d.num_rows)} for f, d, t in pairs]
+    ).noted(
+        *(
+            t.note(os.path.basename(d.path) if d.path else f"data set {f + 1}", d.num_rows)
+            for f, d, t in pairs
+        )
+    )
     if from_start:
-        result.notes.append(
+        result = result.noted(
             "each onset matched to its own bounce (the flights' ratio chain counts them), and the flights' log ratios "
             "fitted from the first stage: the flights' own e scatter beyond the stated timing noise, so onset "
             "residuals of a constant e are a random walk that a least-squares fit of the onsets would follow"
@@ -369,6 +370,7 @@ def _note_trends(result, setup, trends, from_start: bool) -> None:
             else "each onset matched to its own bounce (the flights' ratio chain counts them), and the flights' log "
             "ratios fitted from the first stage (no timing noise stated)"
         )
+    return result
 
 
 def _restarts(setup, best, own_starts, rows, opts):
@@ -384,75 +386,33 @@ def _restarts(setup, best, own_starts, rows, opts):
     return best, restarts
 
 
-def _note_restarts(result, setup, restarts) -> None:
-    if restarts:
-        names = [d.path or f"data set {f + 1}" for f, d in enumerate(setup.datasets)]
-        result.notes.append(
-            "joint fit also started from each file's own solution (fitted alone, one start); final chi-square "
-            "over all fitted rows of this fit: "
-            + ", ".join(f"from {os.path.basename(names[f])}: {2 * c:.6g}" for f, c in restarts)
-        )
-
-
-def _fill_alone(result: FitResult, setup, best, rows, opts) -> None:
-    """Each file's "alone" e into `result.datasets` (deferred by `opts.defer_alone`)."""
-    before = setup.evaluator.calls
-    for entry, alone in zip(result.datasets, alone_restitution(setup, best, rows, opts), strict=True):
-        entry["restitution_alone"] = alone
-    result.simulations += setup.evaluator.calls - before
+def _note_restarts(result: FitOutcome, setup, restarts) -> FitOutcome:
+    """The note of the restarts from each file's own solution, where there were any."""
+    if not restarts:
+        return result
+    names = [d.path or f"data set {f + 1}" for f, d in enumerate(setup.datasets)]
+    return result.noted(
+        "joint fit also started from each file's own solution (fitted alone, one start); final chi-square "
+        "over all fitted rows of this fit: "
+        + ", ".join(f"from {os.path.basename(names[f])}: {2 * c:.6g}" for f, c in restarts)
+    )
 
 
 def _warm_evaluator(setup, pool) -> concurrent.futures.Future | None:
     """Hunt–Crossley: compile the fit's program in `pool` while the start is computed.
 
-    Hunt–Crossley's start points simulate single impacts (`hunt_crossley_from_restitution`,
+    Hunt–Crossley's start points simulate single impacts (`inverse_by_simulation`,
     a compiled program of its own), and so does its "alone" fit of a few files: the
     fit's program compiles meanwhile, by one run at the closed-form start (`refine=0`:
     nothing simulated), with the shapes of every later call. Kelvin–Voigt's start is in
     closed form: nothing to overlap (None).
     """
-    if setup.law != "hunt-crossley":
+    if not LAW_MODELS[setup.law].restitution_depends_on_speed:
         return None
     e = setup.e0 if setup.e0 is not None else 0.8
     mass = float(setup.datasets[0].mass)
-    kappa, k_r = hunt_crossley_from_restitution(e, CONTACT_TIME_GUESS, mass, setup.speed, refine=0)
+    try:
+        kappa, k_r = inverse_by_simulation(setup.law, e, CONTACT_TIME_GUESS, mass, setup.speed, refine=0)
+    except NoClosedFormError:
+        return None
     return pool.submit(keep_placement(setup.evaluator.warm), point_at(setup, kappa, k_r))
-
-
-def _restore_clocks(result, originals, clocks) -> None:
-    """Report offsets on the files' own absolute clocks again (see `ABSOLUTE_CLOCK_S`)."""
-    n = len(originals)
-    layout = Layout(n_files=n)
-    i_off = PARAMETERS.index("offset")
-    if result.joint_z is not None and np.asarray(result.joint_z).size == layout.size:
-        z = np.array(result.joint_z, dtype=float)
-        for f, ref in enumerate(clocks):
-            z[layout.index[f, i_off]] += ref
-        result.joint_z = z
-    result.z = np.array(result.z, dtype=float)
-    result.z[i_off] += clocks[0]
-    entry = result.parameters["offset"]
-    result.parameters["offset"] = {
-        **entry,
-        "value": entry["value"] + clocks[0],
-        "ci95": [v + clocks[0] for v in entry["ci95"]],
-    }
-    for f, ref in enumerate(clocks):
-        if f < len(result.datasets):
-            own = result.datasets[f]["parameters"].get("offset")
-            if own is not None:
-                own["value"] += ref
-                own["ci95"] = [v + ref for v in own["ci95"]]
-    result.data = originals[0]
-    result.datasets_data = list(originals)
-    if clocks[0]:
-        problem = result.problem
-        result.problem = eqx.tree_at(
-            lambda p: (p.y_obs, p.t_obs),
-            problem,
-            (jnp.asarray(problem.y_obs) + clocks[0], jnp.asarray(problem.t_obs) + clocks[0]),
-        )
-    result.notes.append(
-        "onsets on an absolute clock: fitted relative to each file's first onset, the offset reported on the file's "
-        "own clock"
-    )

@@ -7,12 +7,15 @@ written with Heaviside functions.
 
 The top level holds the core: models, contact laws, Heaviside options, `simulate`, its
 `Solution` and `Status`, observations, `sweep`, `use_loop_kernels` and
-`use_compilation_cache`. Studies, figures,
-the paper's reproduction and debugging helpers are namespaces: `jaxunilat.analysis`,
-`jaxunilat.plot`, `jaxunilat.paper`, `jaxunilat.debug`.
+`enable_compilation_cache`. Studies, figures, the paper's reproduction and debugging
+helpers are namespaces: `jaxunilat.analysis`, `jaxunilat.plot`, `jaxunilat.paper`,
+`jaxunilat.debug`; the identification of contact parameters is `jaxunilat.identify`.
 
-Importing the package enables float64 in JAX; it never imports matplotlib or scipy. It
-also lets XLA:CPU compile each small loop into one kernel (the event mode's steps run
+Importing the package enables float64 in JAX; it never imports matplotlib or scipy. Each
+public name is imported from its module when first used, so `import jaxunilat` itself is
+light (the command line's `--help` imports no JAX): float64 is enabled through the
+`JAX_ENABLE_X64` environment variable, which JAX reads when it is imported, or at once
+where JAX was imported first. It also lets XLA:CPU compile each small loop into one kernel (the event mode's steps run
 about 10× faster): before JAX starts its backend, it adds
 `--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold=1048576` to the
 `XLA_FLAGS` environment variable (inherited by child processes). Set
@@ -21,90 +24,115 @@ JAX computation: a backend already started cannot take the option, and the first
 `simulate` then warns once with the fix. `use_loop_kernels()` sets it explicitly.
 """
 
-import jax
+import importlib
+import os
+import sys
 
-jax.config.update("jax_enable_x64", True)
+from ._internal._loop_kernels import apply_on_import as _apply_loop_kernels
 
-from ._solver._loop_kernels import apply_on_import as _apply_loop_kernels  # noqa: E402
 
+def _enable_float64() -> None:
+    """Float64 in JAX: now if JAX is imported already, else when it is (`JAX_ENABLE_X64`)."""
+    if "jax" in sys.modules:
+        sys.modules["jax"].config.update("jax_enable_x64", True)
+    else:
+        os.environ["JAX_ENABLE_X64"] = "1"
+
+
+_enable_float64()
 # Before anything computes: XLA reads XLA_FLAGS when JAX starts its backend.
 _apply_loop_kernels()
 
-from . import analysis as analysis, debug as debug, paper as paper, plot as plot  # noqa: E402
-from ._models import (  # noqa: E402
-    PAPER_DRAG as PAPER_DRAG,
-    PAPER_GAP as PAPER_GAP,
-    PAPER_GRAVITY as PAPER_GRAVITY,
-    PAPER_MASS as PAPER_MASS,
-    TABLE1 as TABLE1,
-    TABLE2 as TABLE2,
-    AbstractContactLaw as AbstractContactLaw,
-    AbstractHeaviside as AbstractHeaviside,
-    AbstractModel as AbstractModel,
-    Ball as Ball,
-    ClampedKelvinVoigt as ClampedKelvinVoigt,
-    Coupling as Coupling,
-    Exact as Exact,
-    ExactHeavisideGradientWarning as ExactHeavisideGradientWarning,
-    HuntCrossley as HuntCrossley,
-    KelvinVoigt as KelvinVoigt,
-    Logistic as Logistic,
-    NoClosedFormError as NoClosedFormError,
-    Softplus as Softplus,
-    ball_state as ball_state,
-    clearance_force as clearance_force,
-    contact_time as contact_time,
-    damping_ratio as damping_ratio,
-    heaviside as heaviside,
-    hunt_crossley_contact_time as hunt_crossley_contact_time,
-    parameters_from_restitution as parameters_from_restitution,
-    restitution as restitution,
-    symmetric_clearance_force as symmetric_clearance_force,
-)
-from ._solver import (  # noqa: E402
-    CONTACT_COLUMNS as CONTACT_COLUMNS,
-    IMPACT_COLUMNS as IMPACT_COLUMNS,
-    RK4 as RK4,
-    EventRecord as EventRecord,
-    Solution as Solution,
-    Status as Status,
-    UncheckedStepWarning as UncheckedStepWarning,
-    apexes as apexes,
-    contact_table as contact_table,
-    impact_table as impact_table,
-    impact_times as impact_times,
-    simulate as simulate,
-    sweep as sweep,
-    use_loop_kernels as use_loop_kernels,
-)
-from .internal._compilation_cache import use_compilation_cache as use_compilation_cache  # noqa: E402
-from .internal._io import read_csv as read_csv, write_csv as write_csv  # noqa: E402
+#: The namespaces (subpackages), imported when first used.
+_NAMESPACES = ("analysis", "debug", "identify", "paper", "plot")
+#: Each public name of the top level, and the module that defines it.
+_PUBLIC = {
+    "read_csv": "._internal._io",
+    "write_csv": "._internal._io",
+    "PAPER_DRAG": "._models",
+    "PAPER_GAP": "._models",
+    "PAPER_GRAVITY": "._models",
+    "PAPER_MASS": "._models",
+    "TABLE1": "._models",
+    "TABLE2": "._models",
+    "AbstractContactLaw": "._models",
+    "AbstractHeaviside": "._models",
+    "AbstractModel": "._models",
+    "Ball": "._models",
+    "ClampedKelvinVoigt": "._models",
+    "Coupling": "._models",
+    "Exact": "._models",
+    "ExactHeavisideGradientWarning": "._models",
+    "HuntCrossley": "._models",
+    "KelvinVoigt": "._models",
+    "Logistic": "._models",
+    "NoClosedFormError": "._models",
+    "Softplus": "._models",
+    "ball_state": "._models",
+    "clearance_force": "._models",
+    "contact_time": "._models",
+    "damping_ratio": "._models",
+    "heaviside": "._models",
+    "hunt_crossley_contact_time": "._models",
+    "parameters_from_restitution": "._models",
+    "restitution": "._models",
+    "symmetric_clearance_force": "._models",
+    "CONTACT_COLUMNS": "._solver",
+    "IMPACT_COLUMNS": "._solver",
+    "RK4": "._solver",
+    "EventRecord": "._solver",
+    "Solution": "._solver",
+    "Status": "._solver",
+    "UncheckedStepWarning": "._solver",
+    "apexes": "._solver",
+    "contact_table": "._solver",
+    "impact_table": "._solver",
+    "impact_times": "._solver",
+    "simulate": "._solver",
+    "sweep": "._solver",
+    "use_loop_kernels": "._internal._loop_kernels",
+    "enable_compilation_cache": "._internal._compilation_cache",
+}
+__all__ = sorted([*_NAMESPACES, *_PUBLIC])
+
 
 #: Names that lived at the top level before the namespaces: each still works, as an
 #: alias of the namespace's name (`jaxunilat.plot_ball` is `jaxunilat.plot.plot_ball`).
 _ALIASES = {
-    "plot_ball": plot,
-    "save_figure": plot,
-    "plot_coupling": plot,
-    "plot_impact_forces": plot,
-    "reproduce": paper,
-    "SensitivityResult": analysis,
-    "ball_sensitivity": analysis,
-    "coupling_sensitivity": analysis,
-    "TangentCoupling": analysis,
-    "ftle": analysis,
-    "GradientGrowth": analysis,
-    "gradient_growth": analysis,
-    "trace_counts": debug,
-    "loop_kernel_bytes": debug,
+    "plot_ball": "plot",
+    "save_figure": "plot",
+    "plot_coupling": "plot",
+    "plot_impact_forces": "plot",
+    "reproduce": "paper",
+    "SensitivityResult": "analysis",
+    "ball_sensitivity": "analysis",
+    "coupling_sensitivity": "analysis",
+    "TangentCoupling": "analysis",
+    "ftle": "analysis",
+    "GradientGrowth": "analysis",
+    "gradient_growth": "analysis",
+    "trace_counts": "debug",
+    "loop_kernel_bytes": "debug",
 }
 
 
 def __getattr__(name: str):
-    namespace = _ALIASES.get(name)
-    if namespace is None:
+    """A public name, imported from its module when first used (`_PUBLIC`); a namespace
+    (`_NAMESPACES`); or an old top-level alias of a namespace's name (`_ALIASES`)."""
+    if name in _NAMESPACES:
+        value = importlib.import_module(f".{name}", __name__)
+    elif name in _PUBLIC:
+        value = getattr(importlib.import_module(_PUBLIC[name], __name__), name)
+    elif name in _ALIASES:
+        return getattr(__getattr__(_ALIASES[name]), name)
+    else:
         raise AttributeError(f"module 'jaxunilat' has no attribute {name!r}")
-    return getattr(namespace, name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})
 
 
 def _version() -> str:

@@ -165,7 +165,7 @@ def main(argv=None) -> int:
     import jax
 
     import jaxunilat as ju
-    from jaxunilat.internal import InputError
+    from jaxunilat._internal import InputError
 
     jax.config.update("jax_cpu_collectives_implementation", "gloo")
     jax.distributed.initialize(

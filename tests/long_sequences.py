@@ -76,7 +76,7 @@ def recording(
     """An `identify.Dataset` of impact onsets as a phone's importer writes it: on the
     recording's clock (`offset` s after its start is the release), jittered, the release
     height estimated `x0_error` (relative) high and marked `estimated`, the noise stated."""
-    import identify
+    from jaxunilat import identify
 
     spec = BALLS[ball]
     t = truth(ball, seed, scatter)["t"]

@@ -6,7 +6,7 @@ import stat
 
 import pytest
 
-from jaxunilat.internal import write_atomically
+from jaxunilat._internal import write_atomically
 from jaxunilat.plot import save_figure
 
 OLD = "earlier contents\n"

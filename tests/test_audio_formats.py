@@ -20,8 +20,8 @@ import sys
 import numpy as np
 import pytest
 from helpers import fifo_errors
+from jaxunilat.identify import import_wav, read_wav
 
-from identify import import_wav, read_wav
 from jaxunilat._cli._main import main
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -215,7 +215,7 @@ def test_wav_variants_give_the_wavs_onsets(tmp_path, reference, label, writer, e
 
 
 def test_read_audio_keeps_the_channels_when_asked(tmp_path, reference):
-    from identify._data._audio_read import read_audio
+    from jaxunilat.identify._data._audio_read import read_audio
 
     x, _ = reference
     path = _four_channels(tmp_path / "four.wav", x)

@@ -3,9 +3,8 @@ recording, a loud click at the start. Recordings: tests/synthetic_audio.py."""
 
 import numpy as np
 import pytest
+from jaxunilat.identify import ImplausibleRecording, detect_onsets, import_wav
 from synthetic_audio import click, drops_recording, gated, recording, write_wav
-
-from identify import ImplausibleRecording, detect_onsets, import_wav
 
 TOL = 0.3e-3  # s, as tests/test_onset_detector.py
 

@@ -267,7 +267,7 @@ def _digest(path):
 
 @pytest.mark.parametrize("label, content, part", DATA, ids=[d[0] for d in DATA])
 def test_bad_data_file_clear_error_and_unmodified(label, content, part, tmp_path, capsys):
-    import identify
+    from jaxunilat import identify
 
     path = tmp_path / "bad.csv"
     path.write_bytes(content if isinstance(content, bytes) else content.encode())
@@ -291,7 +291,7 @@ def test_good_inputs_are_never_modified(tmp_path, capsys):
     data = tmp_path / "drop_apex.csv"
     shutil.copy(os.path.join(root, "drop_apex.csv"), data)
     before = _digest(data)
-    import identify
+    from jaxunilat import identify
 
     identify.load_dataset(str(data))
     # A bad flag after a good file: the file is read-validated and left alone.

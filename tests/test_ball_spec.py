@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from synthetic_audio import background, click, write_wav
 
-import identify
+from jaxunilat import identify
 from jaxunilat._cli._main import main
 
 DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data")

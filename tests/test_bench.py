@@ -196,41 +196,12 @@ def test_old_bench_json_reads_with_todays_goal_keys(tmp_path):
     assert not any(line.startswith("P") for line in table.splitlines())
 
 
-def _extra_row(size, log):
-    """A registered row (an entry point's object): called with the size and the log."""
-    log(f"extra at {size.name}")
-    return {"status": "measured", "size": size.name}
-
-
-def test_registered_rows_run_and_missing_ones_say_skipped(monkeypatch):
-    """Rows come from entry points of the group jaxunilat.bench; the expected ones that are
-    not registered, or whose module cannot be imported, say "skipped"."""
-    from importlib.metadata import EntryPoint
-
-    size = _bench.SIZES["tiny"]
-    monkeypatch.setattr(_bench, "registered_rows", dict)
-    rows = _bench._registered(size, print)
-    assert list(rows) == ["identification", "joint_fit"]
-    assert rows["identification"]["rows"] == [] and rows["identification"]["status"].startswith("skipped")
-    assert rows["joint_fit"]["status"].startswith("skipped")
-
-    eps = {
-        "joint_fit": EntryPoint("joint_fit", "no_such_module_anywhere:row", _bench.ROW_GROUP),
-        "extra": EntryPoint("extra", f"{__name__}:_extra_row", _bench.ROW_GROUP),
-    }
-    monkeypatch.setattr(_bench, "registered_rows", lambda: eps)
-    lines = []
-    rows = _bench._registered(size, lines.append)
-    assert list(rows) == ["identification", "joint_fit", "extra"]
-    assert "cannot be loaded" in rows["joint_fit"]["status"]
-    assert rows["extra"] == {"status": "measured", "size": "tiny"} and lines == ["extra at tiny"]
-
-
-def test_identify_registers_its_rows():
-    """The installed metadata names identify's rows, and at the tiny size they skip at once."""
-    eps = _bench.registered_rows()
-    assert {"identification", "joint_fit"} <= set(eps)
-    rows = _bench._registered(_bench.SIZES["tiny"], print)
+def test_identify_rows_are_listed_and_skip_at_the_tiny_size():
+    """The bench's identification rows are named in its table (no plugin lookup), and at
+    the tiny size they skip at once."""
+    assert set(_bench.ROWS) == {"identification", "joint_fit"}
+    assert all(target.startswith("jaxunilat.identify._bench:") for target in _bench.ROWS.values())
+    rows = _bench._identify_rows(_bench.SIZES["tiny"], print)
     assert rows["identification"] == {"status": "skipped at size tiny", "rows": []}
     assert rows["joint_fit"] == {"status": "skipped at size tiny"}
 

@@ -21,8 +21,8 @@ import zipfile
 
 import numpy as np
 import pytest
+from jaxunilat.identify import import_phyphox, import_wav
 
-from identify import import_phyphox, import_wav
 from jaxunilat._cli._main import main
 
 KINDS = ("wav", "audio", "phyphox", "video")
@@ -178,7 +178,7 @@ def test_a_100000_row_phyphox_export_is_answered_in_seconds(tmp_path, capsys):
 
 
 def test_a_recording_beyond_the_sample_limit_is_refused_from_its_header(tmp_path, capsys):
-    from identify._data._audio_read import MAX_SAMPLES
+    from jaxunilat.identify._data._audio_read import MAX_SAMPLES
 
     path = tmp_path / "long.wav"
     frames = MAX_SAMPLES + 1

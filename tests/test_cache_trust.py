@@ -19,8 +19,12 @@ import numpy as np
 import pytest
 
 import jaxunilat as ju
-from jaxunilat.internal import _executables
-from jaxunilat.internal._executables import ExecutableCache, disable_executable_cache, enable_executable_cache
+from jaxunilat._internal import _executables
+from jaxunilat._internal._executables import (
+    ExecutableCache,
+    disable_executable_cache,
+    enable_executable_cache,
+)
 
 POSIX = hasattr(os, "getuid")
 COMMAND = ["simulate", "ball", "--solver", "rk4", "--dt", "1e-5", "--t1", "0.05"]

@@ -374,8 +374,9 @@ def test_bundled_data_is_found_from_any_working_folder(tmp_path, monkeypatch):
     beside the package, not only in the working folder."""
     import os
 
-    from identify._cli._identify import default_data_path
-    from jaxunilat.internal import bundled_data
+    from jaxunilat.identify._cli._identify import default_data_path
+
+    from jaxunilat._internal import bundled_data
 
     def data_sets():
         return bundled_data("*.csv")

@@ -1,8 +1,8 @@
 """The command line's light paths, its global flags, and the bundled data of an install.
 
 `jaxunilat --help`, `--version` and the help of jaxunilat's own commands import no other
-package: the commands of `identify` are listed with the help line their source gives and
-imported only when the command line names one. (Importing `jaxunilat` itself imports JAX
+package and nothing of `jaxunilat.identify`: the identify commands are listed with the
+help line their source gives and imported only when the command line names one. (Importing `jaxunilat` itself imports JAX
 and the solver, so the checks are on the packages imported, not on JAX and not on time.)
 The global flags are accepted before the command and after it. The repository's data/
 is installed as `jaxunilat._data`, where `bundled_data` looks first.
@@ -27,13 +27,14 @@ _CHILD = """\
 import sys
 from jaxunilat._cli._main import main
 code = main({argv!r})
-top = sorted({{m.split(".")[0] for m in sys.modules}})
+top = sorted({{"identify" if m.startswith("jaxunilat.identify") else m.split(".")[0] for m in sys.modules}})
 print("MODULES", code, " ".join(top))
 """
 
 
 def _run_child(argv: list[str]) -> tuple[int, set[str], str]:
-    """Run `main(argv)` in a fresh interpreter: (exit code, top-level packages imported, stdout)."""
+    """Run `main(argv)` in a fresh interpreter: (exit code, top-level packages imported, with
+    `jaxunilat.identify` counted as "identify", stdout)."""
     out = subprocess.run(
         [sys.executable, "-c", _CHILD.format(argv=argv)],
         capture_output=True,
@@ -67,13 +68,13 @@ def test_a_command_of_another_package_is_imported_when_named():
 def test_the_help_lines_read_from_the_source_are_the_registered_ones():
     """What `jaxunilat --help` lists for identify's commands without importing them is what
     their parsers say once loaded (else `written_summary` must give None)."""
-    points = _main._plugin_points()
+    targets = dict(_main.COMMANDS)
     full = build_parser()
     registered = {a.dest: a.help for a in _subcommands(full)._choices_actions}
     lazy = build_parser(lazy=True)
     listed = {a.dest: a.help for a in _subcommands(lazy)._choices_actions}
     for name in IDENTIFY_COMMANDS:
-        assert _main.written_summary(points[name]) == registered[name], name
+        assert _main.written_summary(name, targets[name]) == registered[name], name
         assert name in _subcommands(lazy).waiting, name
     assert listed == registered
     assert list(listed) == list(registered)  # the same order
@@ -90,8 +91,6 @@ def test_a_waiting_command_loads_in_its_place():
 
 
 def test_a_source_without_a_plain_help_line_gives_none(tmp_path, monkeypatch):
-    from importlib.metadata import EntryPoint
-
     (tmp_path / "plug_a.py").write_text(
         "HELP = 'x'\n"
         "def register(commands):\n"
@@ -102,24 +101,12 @@ def test_a_source_without_a_plain_help_line_gives_none(tmp_path, monkeypatch):
         "    p = commands.add_parser('a', help='the plain line', description='more')\n"
     )
     monkeypatch.syspath_prepend(str(tmp_path))
-    group = "jaxunilat.commands"
-    assert _main.written_summary(EntryPoint("a", "plug_a:register", group)) is None
-    assert _main.written_summary(EntryPoint("a", "plug_a:other", group)) is None
-    assert _main.written_summary(EntryPoint("a", "plug_a:plain", group)) == "the plain line"
-    assert _main.written_summary(EntryPoint("a", "plug_a:missing", group)) is None
-    assert _main.written_summary(EntryPoint("a", "no_such_module_here:register", group)) is None
+    assert _main.written_summary("a", "plug_a:register") is None
+    assert _main.written_summary("a", "plug_a:other") is None
+    assert _main.written_summary("a", "plug_a:plain") == "the plain line"
+    assert _main.written_summary("a", "plug_a:missing") is None
+    assert _main.written_summary("a", "no_such_module_here:register") is None
     assert "plug_a" not in sys.modules
-
-
-def test_a_command_whose_package_is_missing_is_left_out(monkeypatch, capsys):
-    import importlib.metadata as metadata
-
-    missing = metadata.EntryPoint("identify", "no_such_package._cli:register", "jaxunilat.commands")
-    monkeypatch.setattr(metadata, "entry_points", lambda group: [missing])
-    with pytest.raises(SystemExit):
-        build_parser(lazy=True).parse_args(["--help"])
-    listed = {line.split()[0] for line in capsys.readouterr().out.splitlines() if line.startswith("    ")}
-    assert "simulate" in listed and "identify" not in listed, listed
 
 
 def _subcommands(parser):
@@ -190,20 +177,22 @@ def test_the_wheel_lists_every_package_and_installs_the_data():
 
     config = tomllib.loads((_ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]
     found = find_namespace_packages(where=str(_ROOT), include=["jaxunilat*", "identify*"])
-    found = [p for p in found if not p.endswith("__pycache__")]
+    found = [
+        f"jaxunilat.{p}" if p.startswith("identify") else p for p in found if not p.endswith("__pycache__")
+    ]
     assert sorted(config["packages"]) == sorted([*found, "jaxunilat._data"])
-    assert config["package-dir"] == {"jaxunilat._data": "data"}
+    assert config["package-dir"] == {"jaxunilat._data": "data", "jaxunilat.identify": "identify"}
     patterns = config["package-data"]["jaxunilat._data"]
     assert "*.csv" in patterns and "README.md" in patterns
     assert (_ROOT / "data" / "drop_trace.csv").is_file()
 
 
 def _fake_install(root: pathlib.Path, with_data: bool) -> None:
-    """`root/jaxunilat/`: the real `internal` package beside an (optional) `_data/`, as
+    """`root/jaxunilat/`: the real `_internal` package beside an (optional) `_data/`, as
     an installed wheel lays them out, and no source tree's data/ beside it."""
     package = root / "jaxunilat"
     shutil.copytree(
-        _ROOT / "jaxunilat" / "internal", package / "internal", ignore=shutil.ignore_patterns("__pycache__")
+        _ROOT / "jaxunilat" / "_internal", package / "_internal", ignore=shutil.ignore_patterns("__pycache__")
     )
     (package / "__init__.py").write_text("")
     if with_data:
@@ -217,7 +206,7 @@ def test_bundled_data_looks_in_the_installed_package_first(with_data, tmp_path):
     _fake_install(site, with_data)
     (work / "data").mkdir(parents=True)
     (work / "data" / "drop_trace.csv").write_text("working folder\n")
-    code = "from jaxunilat.internal._io import bundled_data; print(bundled_data('drop_trace.csv'))"
+    code = "from jaxunilat._internal._io import bundled_data; print(bundled_data('drop_trace.csv'))"
     env = {**os.environ, "PYTHONPATH": str(site)}
     out = subprocess.run(
         [sys.executable, "-c", code],

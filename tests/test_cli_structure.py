@@ -32,7 +32,7 @@ def test_the_command_line_of_jaxunilat_never_imports_identify():
         f"{path.relative_to(_ROOT)}:{line}: {name}"
         for path in sorted((_ROOT / "jaxunilat" / "_cli").rglob("*.py"))
         for line, name in _imported_modules(path)
-        if name.split(".")[0] == "identify"
+        if name.split(".")[0] == "identify" or name.startswith("jaxunilat.identify")
     ]
     assert offenders == []
 
@@ -42,21 +42,24 @@ def test_identify_commands_import_no_private_jaxunilat_module():
         f"{path.relative_to(_ROOT)}:{line}: {name}"
         for path in sorted((_ROOT / "identify" / "_cli").rglob("*.py"))
         for line, name in _imported_modules(path)
-        if name.startswith("jaxunilat.") and any(p.startswith("_") for p in name.split(".")[1:])
+        if name.startswith("jaxunilat.")
+        and name != "jaxunilat._internal"
+        and not name.startswith("jaxunilat.identify")
+        and any(p.startswith("_") for p in name.split(".")[1:])
     ]
     assert offenders == []
 
 
-def test_identify_registers_its_commands_as_entry_points():
-    from importlib.metadata import entry_points
+def test_identify_commands_are_in_the_command_table():
+    """identify's commands are lines of the one command table, in the subpackage
+    `jaxunilat.identify`; no entry-point group connects them."""
+    from jaxunilat._cli._main import COMMANDS, _loaded
 
-    from jaxunilat.internal import COMMANDS_GROUP
-
-    points = {p.name: p for p in entry_points(group=COMMANDS_GROUP)}
-    assert IDENTIFY_COMMANDS <= set(points), "reinstall: pip install -e . --no-deps"
+    targets = dict(COMMANDS)
+    assert IDENTIFY_COMMANDS <= set(targets)
     for name in IDENTIFY_COMMANDS:
-        assert points[name].value.startswith("identify._cli."), points[name].value
-        assert callable(points[name].load())
+        assert targets[name].startswith("jaxunilat.identify._cli."), targets[name]
+        assert callable(_loaded(targets[name]))
 
 
 def test_a_fresh_help_lists_every_command():
@@ -65,20 +68,6 @@ def test_a_fresh_help_lists_every_command():
     ).stdout
     listed = {line.split()[0] for line in out.splitlines() if line.startswith("    ") and line.split()}
     assert IDENTIFY_COMMANDS | {"simulate", "sensitivity", "reproduce", "bench"} <= listed, out
-
-
-def test_without_identify_the_command_line_still_works(monkeypatch, capsys):
-    """An entry point whose package is not installed is left out, the rest works."""
-    import importlib.metadata as metadata
-
-    missing = metadata.EntryPoint("identify", "no_such_package._cli:register", "jaxunilat.commands")
-    monkeypatch.setattr(metadata, "entry_points", lambda group: [missing])
-    with pytest.raises(SystemExit):
-        from jaxunilat._cli._main import build_parser
-
-        build_parser().parse_args(["--help"])
-    listed = {line.split()[0] for line in capsys.readouterr().out.splitlines() if line.startswith("    ")}
-    assert "simulate" in listed and "bench" in listed and not IDENTIFY_COMMANDS & listed, listed
 
 
 # -- exit codes by type -----------------------------------------------------------------

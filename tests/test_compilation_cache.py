@@ -47,13 +47,13 @@ def test_jaxunilat_cache_dir_moves_it(tmp_path):
 
 SCRIPT = """
 import sys, jaxunilat as ju
-print(ju.use_compilation_cache(sys.argv[1]))
+print(ju.enable_compilation_cache(sys.argv[1]))
 ju.simulate(ju.Ball.table1(2), (-0.4, -1 / 0.122), 0.05, solver="event", samples=11)
 """
 
 
 def test_the_python_api_uses_the_cache_when_asked(tmp_path):
-    """`jaxunilat.use_compilation_cache(path)` in a script: the compiled programs land in
+    """`jaxunilat.enable_compilation_cache(path)` in a script: the compiled programs land in
     `path`, and a second run of the script compiles nothing new; without the call, a
     script leaves JAX's settings alone (nothing cached)."""
     environ = {k: v for k, v in os.environ.items() if k not in ("JAXUNILAT_NO_CACHE", "JAXUNILAT_CACHE_DIR")}
@@ -71,7 +71,7 @@ def test_the_python_api_uses_the_cache_when_asked(tmp_path):
         if _ == 0:
             first = _entries(cache)
     assert first and _entries(cache) == first
-    plain = SCRIPT.replace("print(ju.use_compilation_cache(sys.argv[1]))", "print(sys.argv[1])")
+    plain = SCRIPT.replace("print(ju.enable_compilation_cache(sys.argv[1]))", "print(sys.argv[1])")
     out = subprocess.run(
         [sys.executable, "-c", plain, str(tmp_path / "unused")],
         capture_output=True,

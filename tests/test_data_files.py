@@ -12,10 +12,9 @@ import shutil
 
 import numpy as np
 import pytest
+from jaxunilat.identify import load_dataset
 from reference import FREE, BallParams, scipy_reference
 from scipy.optimize import brentq
-
-from identify import load_dataset
 
 DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data")
 

@@ -5,9 +5,9 @@ import os
 
 import numpy as np
 import pytest
+from jaxunilat.identify import Dataset, load_dataset, write_dataset
 
-import identify
-from identify import Dataset, load_dataset, write_dataset
+from jaxunilat import identify
 
 GOOD = """# jaxunilat-data: 1
 # scene = drop

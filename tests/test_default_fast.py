@@ -16,7 +16,7 @@ import pytest
 import jaxunilat as ju
 from jaxunilat._bench import _goals as bench_goals
 from jaxunilat._cli import _environment
-from jaxunilat._solver import _loop_kernels
+from jaxunilat._internal import _loop_kernels
 
 OPTION = "xla_cpu_small_while_loop_byte_threshold"
 SETTING = f"--xla_backend_extra_options={OPTION}=1048576"

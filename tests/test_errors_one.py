@@ -144,3 +144,24 @@ def test_a_command_whose_print_fails_names_stdout_not_a_bug(tmp_path, monkeypatc
     err = capsys.readouterr().err
     assert code == 1
     assert err == "jaxunilat: error: stdout: cannot write: [Errno 28] No space left on device\n"
+
+
+def test_a_failed_sweep_or_study_raises_the_solvers_message_alone():
+    """`sweep` and the `analysis` studies give a solver failure as `simulate` does: one
+    EquinoxRuntimeError with the solver's message, not JAX's callback traceback."""
+    import jax.numpy as jnp
+
+    def row(kappa):
+        return jaxunilat.simulate(jaxunilat.Ball.table1(2, kappa=kappa), Y0, 1.0, max_steps=100).ys["x"]
+
+    with pytest.raises(eqx.EquinoxRuntimeError) as info:
+        jaxunilat.sweep(row, jnp.array([1e4, 2e4]))
+    message = str(info.value)
+    assert message.startswith("jaxunilat.simulate: the solver used all max_steps = 100 steps")
+    assert "\n" not in message and not any(word in message for word in EQUINOX_ADVICE)
+
+    coupling = jaxunilat.Coupling.table2(1)
+    with pytest.raises(eqx.EquinoxRuntimeError) as info:
+        jaxunilat.analysis.coupling_features(coupling, 0.5, samples=101, max_steps=20)
+    assert str(info.value).startswith("jaxunilat.simulate: ")
+    assert "\n" not in str(info.value) and not any(word in str(info.value) for word in EQUINOX_ADVICE)

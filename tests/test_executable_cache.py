@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 import jaxunilat as ju
-from jaxunilat.internal import _executables
-from jaxunilat.internal._executables import (
+from jaxunilat._internal import _executables
+from jaxunilat._internal._executables import (
     ExecutableCache,
     call_key,
     disable_executable_cache,
@@ -131,7 +131,7 @@ def test_a_program_with_host_callbacks_is_called_plainly(cache_dir, monkeypatch)
     serializing, and keeps nothing."""
     from jax.experimental import serialize_executable
 
-    from jaxunilat.internal._executables import kept_call
+    from jaxunilat._internal._executables import kept_call
 
     seen = []
     jitted = jax.jit(lambda x: (jax.debug.callback(lambda v: seen.append(float(v)), x.sum()), 2.0 * x)[1])

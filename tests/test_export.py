@@ -10,10 +10,10 @@ import math
 import xml.etree.ElementTree as ET
 
 import pytest
+from jaxunilat.identify._apply._export import nonadhesive_rebound
 
-import identify
 import jaxunilat as ju
-from identify._apply._export import nonadhesive_rebound
+from jaxunilat import identify
 from jaxunilat._cli._main import main
 
 KAPPA, K_R, MASS = 1e4, 0.2, 2.7e-3

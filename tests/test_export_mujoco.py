@@ -20,8 +20,8 @@ mujoco = pytest.importorskip(
     "mujoco", reason="MuJoCo is not installed; install the extra: pip install '.[mujoco]'"
 )
 
-import identify  # noqa: E402
 import jaxunilat as ju  # noqa: E402
+from jaxunilat import identify  # noqa: E402
 
 #: (κ N/m, k_r N·s/m, m kg): a table-tennis ball (Table 1 example 2's κ, k_r at 2.7 g), a
 #: heavier, stiffer ball, and a strongly damped contact (ζ = 0.096, e = 0.74) where

@@ -17,7 +17,7 @@ import os
 import numpy as np
 import pytest
 
-import identify
+from jaxunilat import identify
 from jaxunilat._cli._main import main
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -33,7 +33,7 @@ def _no_cache(monkeypatch):
 
 
 def _covers(entry, truth):
-    lo, hi = entry["ci95"]
+    lo, hi = entry.ci95
     return lo <= truth <= hi
 
 
@@ -63,7 +63,7 @@ def test_a_clean_trace_at_10_to_11_mm_is_not_refused_by_a_fixed_cap(scatter):
     noisy = dataclasses.replace(d, x=d.x + rng.normal(0, scatter, d.x.size), noise=None, path=None)
     result = identify.fit(noisy, starts=1)
     assert result.converged and result.noise["verdict"] != "misfit", result.noise
-    lo, hi = result.derived["restitution"]["ci95"]
+    lo, hi = result.derived["restitution"].ci95
     assert lo <= 0.935 <= hi
 
 
@@ -78,7 +78,7 @@ def test_x0_from_the_first_sample_is_fitted_by_default():
     result = identify.fit(video, starts=1)
     assert {"x0", "offset"} <= set(result.free) and "v0" not in result.free
     assert result.converged, result.message
-    assert _covers(result.parameters["kappa"], KAPPA_TRUE), result.parameters["kappa"]
+    assert _covers(result.params["kappa"], KAPPA_TRUE), result.params["kappa"]
     assert any("first sample" in note for note in result.notes)
 
 
@@ -86,20 +86,20 @@ def test_bundled_trace_keeps_its_result_and_its_fixed_x0():
     """x0 stays fixed (stated apart from the samples); the trace's scale and level are
     fitted by default, and held they give the result the file gave before them."""
     result = identify.fit(TRACE)
-    assert result.free == ["kappa", "k_r", "scale", "level"]
+    assert result.free == ("kappa", "k_r", "scale", "level")
     assert result.kappa == pytest.approx(26609.9, abs=0.1)
     held = identify.fit(TRACE, freeze=("scale", "level"))
-    assert held.free == ["kappa", "k_r"]
+    assert held.free == ("kappa", "k_r")
     assert held.kappa == pytest.approx(27097.8, abs=0.1)
     # Two more free parameters can only widen the interval.
-    assert result.parameters["kappa"]["stderr"] > held.parameters["kappa"]["stderr"]
+    assert result.params["kappa"].stderr > held.params["kappa"].stderr
 
 
 def test_joint_trace_and_impacts_reach_their_minimum():
     """Before: χ² 2718 at κ = 28506 [27919, 29105] (truth 26660 outside); each file alone covers it."""
     result = identify.fit([TRACE, IMPACTS])
     assert result.converged, result.message
-    assert _covers(result.parameters["kappa"], KAPPA_TRUE), result.parameters["kappa"]
+    assert _covers(result.params["kappa"], KAPPA_TRUE), result.params["kappa"]
     assert result.chi2 < 2700
     assert any("own solution" in note for note in result.notes)
 
@@ -130,10 +130,8 @@ def test_onsets_on_an_absolute_clock():
     unix = dataclasses.replace(d, t=d.t + 1.7e9, path=None)
     result = identify.fit(unix, starts=1)
     assert result.converged, result.message
-    assert result.parameters["offset"]["value"] == pytest.approx(1.7e9 + 0.0731, abs=1e-4)
-    assert result.derived["restitution"]["value"] == pytest.approx(
-        ref.derived["restitution"]["value"], abs=1e-6
-    )
+    assert result.params["offset"].value == pytest.approx(1.7e9 + 0.0731, abs=1e-4)
+    assert result.derived["restitution"].value == pytest.approx(ref.derived["restitution"].value, abs=1e-6)
 
 
 def test_swapped_export_rows_keep_both_onsets(tmp_path):
@@ -157,8 +155,8 @@ def test_more_free_parameters_than_rows_is_refused():
 def test_holdout_under_an_infinite_uncertainty_cannot_judge():
     from types import SimpleNamespace
 
-    from identify._fit._robust import Rows
-    from identify._report._summary import _holdout
+    from jaxunilat.identify._fit._robust import Rows
+    from jaxunilat.identify._fit._summary import _holdout
 
     d = identify.load_dataset(TRACE)
     rows = Rows.make([10], 0.3)
@@ -182,15 +180,22 @@ def test_report_says_which_rows_each_chi_square_is_over(trace_fit):
 
 
 def test_profile_ends_are_stated_in_words(trace_fit):
-    result = dataclasses.replace(trace_fit)
-    result.profile = dict(kappa=np.array([2e4, 3e4]), delta_chi2=np.array([0.0, 5.0]), ci95=[np.nan, 2.8e4])
+    from jaxunilat.identify._fit._outcome import Profile
+
+    profile = Profile(
+        kappa=np.array([2e4, 3e4]),
+        delta_chi2=np.array([0.0, 5.0]),
+        ci95=(np.nan, 2.8e4),
+        value=trace_fit.kappa,
+    )
+    result = dataclasses.replace(trace_fit, profile=profile)
     text = result.report()
     section = text[text.index("[[Profile likelihood]]") :]
     assert "unknown" in section and "no lower bound" not in section.splitlines()[1]
 
 
 def test_profile_below_the_fit_means_not_converged(monkeypatch):
-    import identify._fit._stages as stages
+    import jaxunilat.identify._fit._stages as stages
 
     original = stages.final_pass
 

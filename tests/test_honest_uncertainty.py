@@ -9,14 +9,15 @@ which shares nothing with jaxunilat or identify).
   height is not converged, identifies nothing, and the command line exits 3.
 """
 
+import dataclasses
 import json
 
 import numpy as np
 import pytest
+from jaxunilat.identify._fit._plausible import closed_form, contradictions
 from throws import throw
 
-import identify
-from identify._fit._plausible import closed_form, contradictions
+from jaxunilat import identify
 
 MASS = 0.04
 
@@ -50,11 +51,11 @@ def test_the_95_percent_interval_of_e_covers_the_truth(chunk):
         ball = _ball(seed)
         result = identify.fit(_dataset(seed, **ball), starts=1)
         e = result.derived["restitution"]
-        lo, hi = e["ci95"]
+        lo, hi = e.ci95
         assert result.converged and not result.contradictions, (seed, ball, result.message)
         assert 0 < hi - lo < 0.1, (seed, ball, e)  # bounded, and neither zero-width nor vacuous
         if not lo <= ball["e"] <= hi:
-            missed.append((seed, round(ball["e"], 4), round(e["value"], 4), (round(lo, 4), round(hi, 4))))
+            missed.append((seed, round(ball["e"], 4), round(e.value, 4), (round(lo, 4), round(hi, 4))))
     assert len(missed) <= 1, f"the 95% interval missed the truth in {len(missed)} of 10 throws: {missed}"
 
 
@@ -68,10 +69,10 @@ def test_a_throws_interval_matches_its_e_alone_in_a_joint_fit():
     joint = identify.fit(files, starts=1)
     for f, data in enumerate(files):
         single = identify.fit(data, starts=1).derived["restitution"]
-        alone = joint.datasets[f]["restitution_alone"]
-        ratio = single["stderr"] / alone["stderr"]
+        alone = joint.datasets[f].restitution_alone
+        ratio = single.stderr / alone.stderr
         assert 1 / 1.6 < ratio < 1.6, (data.path, single, alone)
-        assert abs(single["value"] - alone["value"]) < 0.5 * (single["stderr"] + alone["stderr"])
+        assert abs(single.value - alone.value) < 0.5 * (single.stderr + alone.stderr)
 
 
 def test_the_gate_flags_an_e_the_flight_ratios_contradict():
@@ -81,8 +82,9 @@ def test_the_gate_flags_an_e_the_flight_ratios_contradict():
     form = closed_form(data)
     assert abs(form.restitution - 0.76) < 0.01  # the closed form itself, against the truth
     result = identify.fit(data, starts=1)
-    assert result.converged and result.contradictions == []
-    result.derived["restitution"]["value"] = 0.0055  # what a wrong basin reported
+    assert result.converged and result.contradictions == ()
+    wrong = dataclasses.replace(result.derived["restitution"], value=0.0055)  # what a wrong basin reported
+    result = dataclasses.replace(result, derived={**result.derived, "restitution": wrong})
     found = contradictions(result)
     assert len(found) == 1 and "tennis.csv" in found[0] and "0.0055" in found[0]
     assert f"{form.restitution:.4f}" in found[0]

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from reference import BallParams, kelvin_voigt_contact_time, kelvin_voigt_restitution, scipy_reference
 
-import identify
 import jaxunilat as ju
+from jaxunilat import identify
 from jaxunilat._cli._main import main
 
 TRUE = dict(kappa=1.6e4, k_r=0.15)
@@ -62,7 +62,7 @@ def _apex_heights(reference, n):
 
 
 def _covers(entry, truth):
-    lo, hi = entry["ci95"]
+    lo, hi = entry.ci95
     return lo <= truth <= hi
 
 
@@ -71,8 +71,8 @@ def test_trace_recovers_kappa_and_k_r(reference):
     print("\n" + result.report())
     assert result.converged, result.message
     for name, truth in TRUE.items():
-        entry = result.parameters[name]
-        assert abs(entry["value"] / truth - 1) <= 0.05, (name, entry, truth)
+        entry = result.params[name]
+        assert abs(entry.value / truth - 1) <= 0.05, (name, entry, truth)
         assert _covers(entry, truth), (name, entry, truth)
     assert result.identifiable["kappa"] and result.identifiable["k_r"] and result.identifiable["restitution"]
     # The noise level is consistent with the file's σ (reduced χ² near 1).
@@ -95,7 +95,7 @@ def test_impacts_without_their_offset_fail_the_chi2_test_and_identify_nothing(re
     assert g["reduced_chi2"] > 100 and g["consistent"] is False and g["p_value"] < 1e-3
     assert not any(result.identifiable[k] for k in ("kappa", "k_r", "contact_time"))
     true_e = math.exp(-math.pi * _zeta() / math.sqrt(1.0 - _zeta() ** 2))  # Kelvin-Voigt
-    lo, hi = result.derived["restitution"]["ci95"]
+    lo, hi = result.derived["restitution"].ci95
     assert not result.identifiable["restitution"] or lo <= true_e <= hi
     assert "WARNING: the model does not fit the data" in report and "leave out --freeze offset" in report
     doc = result.to_json_dict()
@@ -108,16 +108,24 @@ def _zeta() -> float:
     return TRUE["k_r"] / (2.0 * (TRUE["kappa"] * MASS) ** 0.5)
 
 
-@pytest.mark.parametrize(("chi2", "n", "p"), [(3.0, 12, 2), (25.0, 14, 2), (1550.0, 1501, 2), (40.0, 3, 2)])
-def test_goodness_of_fit_p_value_matches_scipy(chi2, n, p):
-    from scipy.stats import chi2 as chi2_dist
+def _chi2_sf_even(x: float, dof: int) -> float:
+    """P(χ² ≥ x) for an even number of degrees of freedom, in closed form:
+    e^(−x/2) Σ_{i < dof/2} (x/2)^i / i! (the tail of a Poisson count)."""
+    assert dof % 2 == 0
+    logs = [i * math.log(x / 2) - math.lgamma(i + 1) for i in range(dof // 2)]
+    top = max(logs)
+    return math.exp(top - x / 2) * sum(math.exp(v - top) for v in logs)
 
-    from identify._fit._uncertainty import goodness_of_fit
+
+@pytest.mark.parametrize(("chi2", "n", "p"), [(3.0, 12, 2), (25.0, 14, 2), (1550.0, 1502, 2), (40.0, 4, 2)])
+def test_goodness_of_fit_p_value_matches_the_closed_form(chi2, n, p):
+    from jaxunilat.identify._fit._uncertainty import goodness_of_fit
 
     g = goodness_of_fit(chi2, n, p, sigma_known=True)
+    expected = _chi2_sf_even(chi2, n - p)
     assert g["dof"] == n - p
-    assert g["p_value"] == pytest.approx(chi2_dist.sf(chi2, n - p), rel=1e-9, abs=1e-300)
-    assert g["consistent"] == (chi2_dist.sf(chi2, n - p) >= 1e-3)
+    assert g["p_value"] == pytest.approx(expected, rel=1e-9, abs=1e-300)
+    assert g["consistent"] == (expected >= 1e-3)
     untested = goodness_of_fit(chi2, n, p, sigma_known=False)
     assert untested["p_value"] is None and untested["consistent"] is None
 
@@ -135,7 +143,7 @@ def test_noise_estimated_from_residuals_when_the_file_states_none(reference):
     # The same optimum to well below a standard error (~1.6%): the two fits take different
     # LM paths (the prior row weighs differently against the nominal and the stated sigma).
     assert without.kappa == pytest.approx(with_sigma.kappa, rel=1e-4)
-    ratio = without.parameters["kappa"]["stderr"] / with_sigma.parameters["kappa"]["stderr"]
+    ratio = without.params["kappa"].stderr / with_sigma.params["kappa"].stderr
     assert ratio == pytest.approx(without.sigma / 5e-4, rel=1e-3)
 
 
@@ -143,8 +151,8 @@ def test_impacts_recover_restitution_with_unknown_offset(reference):
     result = identify.fit(_impacts(reference, seed=2), nuisance=("offset",), starts=2)
     print("\n" + result.report())
     assert result.converged, result.message
-    assert abs(result.derived["restitution"]["value"] - E_TRUE) <= 0.005
-    assert abs(result.parameters["offset"]["value"] - OFFSET) <= 1e-3
+    assert abs(result.derived["restitution"].value - E_TRUE) <= 0.005
+    assert abs(result.params["offset"].value - OFFSET) <= 1e-3
     assert _covers(result.derived["restitution"], E_TRUE)
     assert result.goodness["consistent"] is True
 
@@ -155,8 +163,8 @@ def test_offset_column_is_closed_form_and_takes_no_runs(reference):
     Checked against a central difference of residuals from explicit runs at offset ± h,
     and the κ, k_r columns still come from 2 runs each (5 runs per call, not 7).
     """
-    from identify._fit._problem import PARAMETERS, evaluate_rows, to_z
-    from identify._fit._setup import build
+    from jaxunilat.identify._fit._problem import PARAMETERS, evaluate_rows, to_z
+    from jaxunilat.identify._fit._setup import build
 
     data = _impacts(reference, seed=7, n=8)
     setup = build(
@@ -191,13 +199,13 @@ def test_apex_heights_identify_e_but_not_kappa(reference):
     )
     result = identify.fit(data, starts=2)
     print("\n" + result.report())
-    assert abs(result.derived["restitution"]["value"] - E_TRUE) <= 0.01
+    assert abs(result.derived["restitution"].value - E_TRUE) <= 0.01
     assert result.identifiable["restitution"]
     assert not result.identifiable["kappa"]
     assert not result.identifiable["k_r"]
     # Apex heights leave log κ essentially undetermined: its 95% interval spans over a decade.
-    kappa = result.parameters["kappa"]
-    assert kappa["ci95"][1] / kappa["ci95"][0] > 10
+    kappa = result.params["kappa"]
+    assert kappa.ci95[1] / kappa.ci95[0] > 10
 
 
 @pytest.mark.slow
@@ -209,8 +217,8 @@ def test_confidence_intervals_cover_the_truth(reference):
     covers = {"kappa": 0, "k_r": 0, "restitution": 0}
     for seed in range(20):
         result = identify.fit(_impacts(reference, seed=100 + seed, n=8), nuisance=("offset",), starts=1)
-        covers["kappa"] += _covers(result.parameters["kappa"], TRUE["kappa"])
-        covers["k_r"] += _covers(result.parameters["k_r"], TRUE["k_r"])
+        covers["kappa"] += _covers(result.params["kappa"], TRUE["kappa"])
+        covers["k_r"] += _covers(result.params["k_r"], TRUE["k_r"])
         covers["restitution"] += _covers(result.derived["restitution"], E_TRUE)
     print("\ncoverage of 20:", covers)
     assert all(count >= 16 for count in covers.values()), covers
@@ -219,11 +227,11 @@ def test_confidence_intervals_cover_the_truth(reference):
 def test_frozen_parameter_and_derived_contact_time(reference):
     data = _trace(reference, seed=4, t1=1.0)
     result = identify.fit(data, freeze=("k_r",), initial={"k_r": TRUE["k_r"]}, starts=1)
-    assert result.parameters["k_r"]["value"] == pytest.approx(TRUE["k_r"], rel=1e-12)
-    assert result.parameters["k_r"]["stderr"] == 0.0
-    assert result.free == ["kappa", "scale", "level"]  # a trace's calibration is fitted by default
+    assert result.params["k_r"].value == pytest.approx(TRUE["k_r"], rel=1e-12)
+    assert result.params["k_r"].stderr == 0.0
+    assert result.free == ("kappa", "scale", "level")  # a trace's calibration is fitted by default
     assert abs(result.kappa / TRUE["kappa"] - 1) <= 0.05
-    assert abs(result.derived["contact_time"]["value"] / TC_TRUE - 1) <= 0.05
+    assert abs(result.derived["contact_time"].value / TC_TRUE - 1) <= 0.05
 
 
 def test_no_retrace_between_fits_of_the_same_shape(reference):

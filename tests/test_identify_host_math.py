@@ -16,9 +16,8 @@ import sys
 
 import numpy as np
 import pytest
+from jaxunilat.identify._fit._kelvin_voigt import parameters_from_restitution, restitution_and_contact_time
 from reference import kelvin_voigt_contact_time, kelvin_voigt_restitution
-
-from identify._fit._kelvin_voigt import parameters_from_restitution, restitution_and_contact_time
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
@@ -73,7 +72,7 @@ jax.monitoring.register_event_duration_secs_listener(
     lambda event, duration, **kw: compiled.append(kw.get("fun_name"))
     if event == "/jax/core/compile/backend_compile_duration" else None
 )
-import identify
+from jaxunilat import identify
 counts = []
 for _ in range(2):
     before = len(compiled)
@@ -110,7 +109,7 @@ class _LinearEvaluator:
 
 @pytest.mark.parametrize("correlation", [0.0, 0.999999])
 def test_levenberg_marquardt_reaches_least_squares_and_stops_without_noise_trials(correlation):
-    from identify._fit._lm import levenberg_marquardt
+    from jaxunilat.identify._fit._lm import levenberg_marquardt
 
     rng = np.random.default_rng(3)
     x = rng.standard_normal(200)

@@ -16,7 +16,7 @@ import warnings
 
 import pytest
 
-import identify
+from jaxunilat import identify
 
 ROOT = pathlib.Path(identify.__file__).parent
 #: Rank of each layer; a module imports its own layer or a layer of lower rank only.
@@ -120,8 +120,8 @@ def test_the_import_graph_is_read_from_the_sources():
     graph = import_graph()
     # Known edges, module level and inside functions, relative and through a package.
     assert "identify._fit._stages" in graph["identify._pipeline"]
-    assert "identify._fit._alone" in graph["identify._report._summary"]
-    assert "identify._fit._restitution" in graph["identify._report._plot"]  # inside a function
+    assert "identify._fit._alone" in graph["identify._fit._summary"]
+    assert "identify._data._import" in graph["identify._fit._plausible"]  # inside a function
     assert "identify._data._format" in graph["identify._data"]
 
 
@@ -140,12 +140,9 @@ def test_a_cycle_and_an_upward_import_are_found():
 
 
 @pytest.mark.parametrize("name", PLOTS)
-def test_the_figures_live_in_identify_plot_and_the_old_names_warn(name):
-    new = getattr(identify.plot, name)
-    with pytest.warns(DeprecationWarning, match=f"identify.plot.{name}"):
-        old = getattr(identify, name)
-    assert old is new
-    assert name in dir(identify) and name in identify.plot.__all__
+def test_the_figures_live_in_identify_plot_only(name):
+    assert name in identify.plot.__all__ and callable(getattr(identify.plot, name))
+    assert not hasattr(identify, name)
 
 
 def test_the_new_place_itself_does_not_warn():

@@ -9,6 +9,7 @@ drag 0.12 s/m (e ≈ 0.9648, t_c ≈ 1.29 ms).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -17,7 +18,7 @@ import pytest
 from bounce_reference import hertz_contact_time, scipy_bounces, scipy_hunt_crossley
 from reference import BallParams, kelvin_voigt_restitution, scipy_reference
 
-import identify
+from jaxunilat import identify
 from jaxunilat._cli._main import main
 
 KAPPA, K_R, MASS, DRAG = 1.6e4, 0.15, 2.7e-3, 0.12
@@ -37,7 +38,7 @@ def _impacts(t, x0, *, noise=NOISE, stated=NOISE, path=None):
 
 
 def _covers(entry, truth):
-    lo, hi = entry["ci95"]
+    lo, hi = entry.ci95
     return lo <= truth <= hi
 
 
@@ -55,15 +56,15 @@ def test_a_spurious_onset_and_a_missed_bounce_do_not_wreck_the_fit(kv_drops):
     print("\n" + result.report())
     assert result.converged
     assert _covers(result.derived["restitution"], E_TRUE)
-    assert abs(result.parameters["offset"]["value"] - 0.0412) < 1e-4
+    assert abs(result.params["offset"].value - 0.0412) < 1e-4
     entry = result.datasets[0]
-    assert [o["row"] for o in entry["outliers"]] == [int(np.flatnonzero(bad == echo)[0])]
-    assert [(m["after_row"], m["before_row"]) for m in entry["missed"]] == [(9, 10)]
+    assert [o.row for o in entry.outliers] == [int(np.flatnonzero(bad == echo)[0])]
+    assert [(m.after_row, m.before_row) for m in entry.missed] == [(9, 10)]
     doc = json.loads(json.dumps(result.to_json_dict(), allow_nan=False))
     assert doc["outliers"][0]["rows"] == [5]
     # With the rows kept, the same data give a fit the χ² test rejects.
     kept = identify.fit(_impacts(bad, 0.30), nuisance=("offset",), keep_outliers=True, starts=1)
-    assert kept.goodness["consistent"] is False and kept.datasets[0]["outliers"] == []
+    assert kept.goodness["consistent"] is False and kept.datasets[0].outliers == ()
 
 
 def test_joint_fit_of_five_heights_recovers_the_shared_truth_with_ci_coverage(kv_drops):
@@ -83,12 +84,12 @@ def test_joint_fit_of_five_heights_recovers_the_shared_truth_with_ci_coverage(kv
         assert result.converged, result.message
         assert len(result.datasets) == 5
         for k, (x0, _) in enumerate(kv_drops.items()):
-            assert abs(result.datasets[k]["parameters"]["x0"]["value"] - x0) < 2e-3
+            assert abs(result.datasets[k].params["x0"].value - x0) < 2e-3
         covered["restitution"] += _covers(result.derived["restitution"], E_TRUE)
         covered["contact_time"] += _covers(result.derived["contact_time"], t_c)
     print(covered)
     assert covered["restitution"] >= 17 and covered["contact_time"] >= 17
-    assert abs(result.derived["restitution"]["value"] - E_TRUE) < 1e-4
+    assert abs(result.derived["restitution"].value - E_TRUE) < 1e-4
 
 
 def test_scatter_above_the_stated_noise_is_estimated_and_said(kv_drops):
@@ -161,7 +162,7 @@ def test_holdout_predicts_the_rest_of_a_trace_within_the_noise():
     assert h["within_noise"] is True and h["rms"] < 1e-3 and h["max"] < 3e-3
     # A 4.2-sigma noise sample (row 1102) may go to the robust pass: counted apart.
     entry = result.datasets[0]
-    assert entry["used"] == t.size - 300 - len(entry["outliers"]) and len(entry["outliers"]) <= 1
+    assert entry.used == t.size - 300 - len(entry.outliers) and len(entry.outliers) <= 1
 
 
 def test_trace_with_unknown_time_origin():
@@ -176,7 +177,7 @@ def test_trace_with_unknown_time_origin():
     result = identify.fit(data, nuisance=("offset",), initial={"offset": 0.1}, starts=1)
     print("\n" + result.report())
     assert result.converged
-    assert abs(result.parameters["offset"]["value"] - 0.123) < 1e-3
+    assert abs(result.params["offset"].value - 0.123) < 1e-3
     assert _covers(result.derived["restitution"], E_TRUE)
 
 
@@ -198,8 +199,7 @@ def test_cli_joint_fit_json_and_exit_codes(tmp_path, kv_drops, monkeypatch, caps
 
     def not_converged(*args, **kwargs):
         result = real(*args, **kwargs)
-        result.converged, result.message = False, "max_iterations = 1 reached"
-        return result
+        return dataclasses.replace(result, converged=False, message="max_iterations = 1 reached")
 
     monkeypatch.setattr(identify, "fit", not_converged)
     assert main(["identify", paths[0], "--fit", "offset", "--json", str(out), "--starts", "1"]) == 3
@@ -215,11 +215,10 @@ def test_forward_mode_gradient_stage_matches_central_differences(kv_drops):
 
     import jax.numpy as jnp
     import optax
-
-    from identify._fit._gradient import gradient_step
-    from identify._fit._robust import Rows
-    from identify._fit._setup import build, start_point
-    from identify._fit._stages import row_weights
+    from jaxunilat.identify._fit._gradient import gradient_step
+    from jaxunilat.identify._fit._robust import Rows
+    from jaxunilat.identify._fit._setup import build, start_point
+    from jaxunilat.identify._fit._stages import row_weights
 
     t = kv_drops[0.20][:8] + 0.03
     setup = build([_impacts(t, 0.20)], law="kelvin-voigt", nuisance=("offset",), freeze=(), initial={},
@@ -261,7 +260,7 @@ def test_forward_mode_gradient_stage_matches_central_differences(kv_drops):
     ],
 )
 def test_unit_slips_are_noted(fields, pattern):
-    from identify._data._format import plausibility_notes
+    from jaxunilat.identify._data._format import plausibility_notes
 
     base = dict(scene="drop", observe="impacts", mass=MASS, drag=DRAG, x0=0.3, v0=0.0, noise=NOISE)
     base.setdefault("t", np.array([0.25, 0.68, 1.09]))

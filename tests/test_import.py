@@ -14,8 +14,8 @@ import wave
 
 import numpy as np
 import pytest
+from jaxunilat.identify import detect_onsets, import_phyphox, import_video, import_wav, load_dataset, read_wav
 
-from identify import detect_onsets, import_phyphox, import_video, import_wav, load_dataset, read_wav
 from jaxunilat._cli._main import main
 
 DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data")

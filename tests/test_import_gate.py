@@ -203,13 +203,13 @@ def _integrated_flight(u, k, g=9.81, dt=1e-4):
 
 @pytest.mark.parametrize(("u", "k"), [(2.0, 0.12), (1 / 0.12, 0.12), (30.0, 0.047), (5.0, 0.0)])
 def test_flight_time_is_the_flight_model(u, k):
-    from identify._data._import import flight_time
+    from jaxunilat.identify._data._import import flight_time
 
     assert flight_time(u, k) == pytest.approx(_integrated_flight(u, k), rel=1e-6)
 
 
 def test_longest_flight_is_the_terminal_speed_limit():
-    from identify._data._import import MAX_DROP_HEIGHT, flight_time, longest_flight
+    from jaxunilat.identify._data._import import MAX_DROP_HEIGHT, flight_time, longest_flight
 
     bound, how = longest_flight(0.12)
     assert bound == pytest.approx((math.pi / 4 + math.asinh(1.0)) / (9.81 * 0.12)) and "1/k = 8.33" in how
@@ -223,7 +223,7 @@ def test_longest_flight_is_the_terminal_speed_limit():
 
 
 def test_bundled_recordings_still_import():
-    from identify import import_phyphox, import_wav
+    from jaxunilat.identify import import_phyphox, import_wav
 
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     assert import_wav(os.path.join(root, "data", "phone_drop.wav"), ball="pingpong").problems == ()

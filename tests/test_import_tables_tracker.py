@@ -13,8 +13,8 @@ import json
 
 import numpy as np
 import pytest
+from jaxunilat.identify import ImplausibleRecording, import_video, load_dataset
 
-from identify import ImplausibleRecording, import_video, load_dataset
 from jaxunilat._cli._main import main
 
 G = 9.81

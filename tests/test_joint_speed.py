@@ -12,11 +12,11 @@ import os
 
 import numpy as np
 import pytest
+from jaxunilat.identify._bench import throws
+from jaxunilat.identify._fit._alone import MAX_ALONE_STARTS
+from jaxunilat.identify._fit._problem import evaluate_rows
 
-import identify
-from identify._bench import throws
-from identify._fit._alone import MAX_ALONE_STARTS
-from identify._fit._problem import evaluate_rows
+from jaxunilat import identify
 
 #: Few bounces and a unique row count: the programs compiled here are this test's own.
 BOUNCES = 7
@@ -49,18 +49,19 @@ def test_a_joint_fit_compiles_once_per_law_and_auto_reuses_the_programs():
         mine = auto.laws[law]
         assert np.isclose(mine["chi2"], single.laws[law]["chi2"], rtol=1e-9)
         for name in ("kappa", "k_r"):
-            assert np.isclose(mine["parameters"][name], single.parameters[name]["value"], rtol=1e-9)
+            assert np.isclose(mine["parameters"][name], single.params[name].value, rtol=1e-9)
     chosen = alone[auto.law]
     assert auto.simulations == chosen.simulations
     for mine, single in zip(auto.datasets, chosen.datasets, strict=True):
-        assert np.isclose(mine["restitution_alone"]["value"], single["restitution_alone"]["value"], rtol=1e-9)
+        assert np.isclose(mine.restitution_alone.value, single.restitution_alone.value, rtol=1e-9)
 
 
 def test_bench_fits_only_jaxunilat_data_files():
     """The bench's identification row fits the bundled `jaxunilat-data` files, never a raw
     phyphox export (which `identify.fit` refuses: it needs `jaxunilat import` first)."""
-    from identify._bench import fit_sets
-    from jaxunilat.internal import bundled_data
+    from jaxunilat.identify._bench import fit_sets
+
+    from jaxunilat._internal import bundled_data
 
     paths = bundled_data("*.csv")
     if not paths:

@@ -20,9 +20,10 @@ import pathlib
 
 import numpy as np
 import pytest
+from jaxunilat.identify._fit._outcome import Profile
+from jaxunilat.identify._fit._profile import profile_closes
 
-import identify
-from identify._fit._profile import profile_closes
+from jaxunilat import identify
 from jaxunilat._cli._main import main
 
 #: data/README.md: the phone recording's mean restitution and contact time.
@@ -99,7 +100,7 @@ def test_a_consistent_fit_keeps_its_kappa_and_the_profile_confirms_it(bundled):
     confirms it (computed without being asked) holds the truth."""
     result = identify.fit(bundled / "drop_trace.csv", starts=1)
     assert result.identifiable["kappa"] and result.profile is not None
-    lo, hi = result.profile["ci95"]
+    lo, hi = result.profile.ci95
     assert lo < 26660 < hi
 
 
@@ -113,5 +114,5 @@ def test_a_consistent_fit_keeps_its_kappa_and_the_profile_confirms_it(bundled):
     ],
 )
 def test_a_profile_open_on_a_side_does_not_close(ci, closes):
-    profile = {"kappa": np.geomspace(1e3, 1e6, 7), "ci95": ci}
+    profile = Profile(kappa=np.geomspace(1e3, 1e6, 7), delta_chi2=np.zeros(7), ci95=ci, value=2.5e4)
     assert (profile_closes(profile) is None) is closes

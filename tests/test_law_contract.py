@@ -55,6 +55,8 @@ def test_the_base_declares_the_law_specific_quantities():
         "smooth_equilibrium",
         "impact_scales",
         "units",
+        "restitution_depends_on_speed",
+        "step_time_scale",
     }
     assert set(_abstract_quantities()) == expected
     doc = jaxunilat.AbstractContactLaw.__doc__
@@ -148,6 +150,14 @@ class _NoRest(jaxunilat.AbstractContactLaw):
     @property
     def units(self):
         return {"kappa": "N/m", "k_r": "N*s/m"}
+
+    @property
+    def restitution_depends_on_speed(self):
+        return False
+
+    @property
+    def step_time_scale(self):
+        return "pi/omega_d"
 
 
 def test_a_law_without_a_rest_criterion_raises_in_the_model():

@@ -15,11 +15,11 @@ import json
 import numpy as np
 import pytest
 from bounce_reference import scipy_bounces
+from jaxunilat.identify._fit import _setup as fit_setup, _stages as fit_stages
+from jaxunilat.identify._fit._plausible import closed_form
 from long_sequences import PINGPONG_E, recording
 
-import identify
-from identify._fit import _setup as fit_setup, _stages as fit_stages
-from identify._fit._plausible import closed_form
+from jaxunilat import identify
 
 
 def _jumps(result, data) -> np.ndarray:
@@ -42,7 +42,7 @@ def test_a_ping_pong_balls_52_onsets_with_e_falling_at_low_speed(seed, scatter):
     data = recording("pingpong", seed, x0_error=-0.1, scatter=scatter)
     result = identify.fit(data)
     assert result.converged and not result.contradictions, result.message
-    e = result.derived["restitution"]["value"]
+    e = result.derived["restitution"].value
     assert abs(e - closed_form(data).restitution) < 0.01
     assert abs(e - PINGPONG_E) < 0.005, e  # the constant part, not an average with the slow bounces
     assert _jumps(result, data).max() < 0.5
@@ -51,7 +51,7 @@ def test_a_ping_pong_balls_52_onsets_with_e_falling_at_low_speed(seed, scatter):
     (trend,) = result.to_json_dict()["restitution_trend"]
     assert trend["direction"] == "falls at low speed" and 0.1 < trend["speed"] < 0.16, trend
     assert trend["e_below"] < trend["e_above"] - 0.01 and trend["rows_used"] == [0, trend["rows_used"][1]]
-    assert 30 < trend["rows_used"][1] < 51 and result.datasets[0]["used"] == trend["rows_used"][1] + 1
+    assert 30 < trend["rows_used"][1] < 51 and result.datasets[0].used == trend["rows_used"][1] + 1
     report = result.report()
     assert "e varies with the impact speed" in report and "falls at low speed" in report
     assert f"rows 1-{trend['rows_used'][1] + 1} of 52" in report
@@ -76,13 +76,13 @@ def test_a_steel_balls_81_onsets_exit_0_in_the_closed_forms_basin(tmp_path, caps
     assert not doc["identifiable"]["kappa"] and doc["restitution_trend"] == [] and doc["restart"] is None
     result = identify.fit(data, starts=1)
     assert _jumps(result, data).max() < 0.1
-    assert result.derived["restitution"]["value"] == pytest.approx(e, abs=1e-3)
+    assert result.derived["restitution"].value == pytest.approx(e, abs=1e-3)
 
 
 def _first_fit_as_before(monkeypatch):
     """The first fit with every onset matched to its nearest predicted one and the onsets
     fitted by least squares first (the stages before counted onsets); the restart as now."""
-    import identify._pipeline as pipeline
+    import jaxunilat.identify._pipeline as pipeline
 
     real = pipeline._fit_laws
 
@@ -109,18 +109,19 @@ def test_a_wrong_basin_is_restarted_from_the_closed_form(monkeypatch, seed, star
     data = recording("steel", seed, x0_error=-0.1)
     _first_fit_as_before(monkeypatch)
     result = identify.fit(data, starts=starts)
-    assert result.restart is not None and result.restart["accepted"], result.notes
-    assert abs(result.restart["first_restitution"] - closed_form(data).restitution) > 0.005
-    assert any(why in reason for reason in result.restart["reasons"]), result.restart
+    assert result.restart is not None and result.restart.accepted, result.notes
+    assert abs(result.restart.first_restitution - closed_form(data).restitution) > 0.005
+    assert any(why in reason for reason in result.restart.reasons), result.restart
     assert result.converged and not result.contradictions
-    assert abs(result.derived["restitution"]["value"] - closed_form(data).restitution) < 0.003
+    assert abs(result.derived["restitution"].value - closed_form(data).restitution) < 0.003
     assert any("restarted from the closed form" in note for note in result.notes)
 
 
 def test_a_restart_contradicted_too_still_exits_3(monkeypatch, tmp_path, capsys):
     """Nothing hidden: when the restart from the closed form lands in a wrong basin too, the
     first fit's reasons stand and the command line exits 3."""
-    import identify._pipeline as pipeline
+    import jaxunilat.identify._pipeline as pipeline
+
     from jaxunilat._cli._main import main
 
     data = recording("steel", 1, x0_error=-0.1)
@@ -130,8 +131,8 @@ def test_a_restart_contradicted_too_still_exits_3(monkeypatch, tmp_path, capsys)
 
     def chosen(fitted, law, offset_note):
         result = real(fitted, law, offset_note)
-        result.derived["restitution"] = {**result.derived["restitution"], "value": 0.5}  # a wrong basin
-        return result
+        wrong = dataclasses.replace(result.derived["restitution"], value=0.5)  # a wrong basin
+        return dataclasses.replace(result, derived={**result.derived, "restitution": wrong})
 
     monkeypatch.setattr(pipeline, "_chosen", chosen)
     code = main(["--no-cache", "identify", str(path), "--starts", "1", "--json", str(tmp_path / "fit.json")])
@@ -152,7 +153,7 @@ def _onsets(e_of_speed, h0=0.4, drag=0.03, n=40, jitter=1e-4, seed=0):
 def test_e_falling_as_the_speed_rises_is_reported_not_cut():
     """Hunt-Crossley's direction (e = 0.96 - 0.04 v): a trend that the report names, with
     the law that follows it; every row stays in the fit. A constant e shows none."""
-    from identify._fit._trend import restitution_trend
+    from jaxunilat.identify._fit._trend import restitution_trend
 
     trend = restitution_trend(_onsets(lambda w: 0.96 - 0.04 * w))
     assert trend is not None and trend.direction == "rises at low speed" and trend.rows is None
@@ -165,7 +166,7 @@ def test_e_falling_as_the_speed_rises_is_reported_not_cut():
 def test_whitened_ratio_rows_scatter_by_the_balls_own_scatter():
     """Log-ratio rows of onsets with both a ball's scatter s and a timing noise that
     dominates the short flights: whitened, they scatter by s (unwhitened, by far more)."""
-    from identify._fit._robust import RatioResiduals
+    from jaxunilat.identify._fit._robust import RatioResiduals
 
     rng = np.random.default_rng(5)
     t = np.cumsum(0.4 * 0.93 ** np.arange(60))  # flights from 400 ms down to 5 ms

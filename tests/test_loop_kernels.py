@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import jaxunilat as ju
-from jaxunilat._solver import _loop_kernels
+from jaxunilat._internal import _loop_kernels
 from jaxunilat._solver._settings import make_settings
 from jaxunilat._solver._simulate import _solve
 

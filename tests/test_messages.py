@@ -15,7 +15,7 @@ import re
 import pytest
 
 from jaxunilat._cli._main import main
-from jaxunilat.internal import write_atomically
+from jaxunilat._internal import write_atomically
 
 FIT = {
     "parameters": {
@@ -175,7 +175,7 @@ def test_a_contradiction_prints_numbers_in_bounded_width(capsys):
     line that reports it shortens every such number to 6 significant digits."""
     from types import SimpleNamespace
 
-    from identify._cli._identify import _verdict
+    from jaxunilat.identify._cli._identify import _verdict
 
     reason = f"drop.csv: the fit's e = {1e170:.4f} contradicts the e = {0.9349:.4f} of its flights"
     code = _verdict(SimpleNamespace(contradictions=[reason], converged=False, message=""))

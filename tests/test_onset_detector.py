@@ -11,10 +11,9 @@ detector, while a detector that times the peak, or a ringing re-peak, is off by 
 
 import numpy as np
 import pytest
+from jaxunilat.identify import ImplausibleRecording, detect_onsets, import_wav
+from jaxunilat.identify._data._import_audio import rise_ratio, select_chain
 from synthetic_audio import recording, write_wav
-
-from identify import ImplausibleRecording, detect_onsets, import_wav
-from identify._data._import_audio import rise_ratio, select_chain
 
 TOL = 0.3e-3  # s
 

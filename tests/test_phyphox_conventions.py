@@ -17,8 +17,7 @@ import re
 
 import numpy as np
 import pytest
-
-from identify import ImplausibleRecording, import_phyphox, ratio_chain
+from jaxunilat.identify import ImplausibleRecording, import_phyphox, ratio_chain
 
 G = 9.81
 REAL = os.path.join(

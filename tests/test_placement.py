@@ -1,5 +1,5 @@
 """Where latency-bound work runs when JAX's default backend is an accelerator
-(`jaxunilat.internal._placement`): a concrete single `simulate`, `identify.fit`,
+(`jaxunilat._internal._placement`): a concrete single `simulate`, `identify.fit`,
 `identify.qualify_fit` and the command line on the host CPU; traced (vmapped, jitted)
 solves where JAX puts them; the user's placement first.
 
@@ -18,12 +18,12 @@ import sys
 import jax
 import pytest
 
-from jaxunilat.internal import _placement
+from jaxunilat._internal import _placement
 
 CHILD = r"""
 import json, jax, numpy as np
 import jaxunilat as ju
-from jaxunilat.internal import _placement, keep_placement, on_host
+from jaxunilat._internal import _placement, keep_placement, on_host
 import concurrent.futures
 
 default, host = jax.devices()
@@ -81,6 +81,6 @@ def test_the_rule(monkeypatch):
 
 
 def test_fit_and_qualify_are_placed():
-    import identify
+    from jaxunilat import identify
 
     assert identify.fit.__wrapped__ is not None and identify.qualify_fit.__wrapped__ is not None

@@ -11,11 +11,11 @@ import math
 
 import numpy as np
 import pytest
+from jaxunilat.identify._apply._qualify import qualify, qualify_fit, rebound_height, verdict
 from reference import FREE, BallParams, scipy_reference
 from scipy.optimize import brentq
 
 import jaxunilat
-from identify._apply._qualify import qualify, qualify_fit, rebound_height, verdict
 from jaxunilat._cli._main import main
 
 M = 2.7e-3
@@ -63,7 +63,7 @@ def test_rebound_height_other_test_and_no_retrace():
 
 
 def test_reexported():
-    import identify
+    from jaxunilat import identify
 
     assert identify.qualify is qualify and identify.qualify_fit is qualify_fit
     assert identify.rebound_height is rebound_height

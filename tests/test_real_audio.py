@@ -11,8 +11,7 @@ import os
 
 import numpy as np
 import pytest
-
-from identify import import_wav, ratio_chain
+from jaxunilat.identify import import_wav, ratio_chain
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 REAL = os.path.join(ROOT, "..", "shared", "real-recordings")

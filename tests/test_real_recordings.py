@@ -135,7 +135,7 @@ def test_eeps_onsets_match_the_authors_bounce_times(capsys, tmp_path):
         os.path.join(REAL, "eeps_pingpong_author_bounce_times.csv"), delimiter=",", skiprows=1, usecols=0
     )
     author = np.asarray(author) * 1e-3
-    import identify
+    from jaxunilat import identify
 
     onsets = np.asarray(
         identify.import_wav(os.path.join(REAL, "eeps_pingpong.wav"), ball="pingpong").dataset.t

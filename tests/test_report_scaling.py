@@ -18,10 +18,10 @@ import re
 
 import numpy as np
 import pytest
+from jaxunilat.identify._fit._joint import Layout
 from reference import BallParams, scipy_reference
 
-import identify
-from identify._fit._joint import Layout
+from jaxunilat import identify
 
 KAPPA, K_R, MASS, DRAG, NOISE = 1.6e4, 0.15, 2.7e-3, 0.12, 2e-5
 FILE_FIELDS = {"name", "rows", "x0", "v0", "offset", "e_alone", "rms", "outliers", "held_out"}
@@ -71,7 +71,7 @@ def _tiled(result, n: int):
         dataclasses.replace(result.datasets_data[g], path=f"/data/throw_{f:02d}.csv", x0=0.1 + 0.01 * f)
         for f, g in enumerate(pick)
     ]
-    entries = [dict(result.datasets[g], data=data[f].path) for f, g in enumerate(pick)]
+    entries = [dataclasses.replace(result.datasets[g], data=data[f].path) for f, g in enumerate(pick)]
     old, new = Layout(k), Layout(n)
     z = np.asarray(result.joint_z)
     joint = new.join([z[old.index[g]] for g in pick])
@@ -105,16 +105,16 @@ def test_json_files_table_has_one_entry_per_file(results, n):
     assert len(set(names)) == n
     for f, entry in zip(files, result.datasets, strict=True):
         assert set(f) >= FILE_FIELDS
-        assert f["rows"] == entry["rows"] and f["outliers"] == len(entry["outliers"])
-        assert f["held_out"] == entry["held_out"]
+        assert f["rows"] == entry.rows and f["outliers"] == len(entry.outliers)
+        assert f["held_out"] == entry.held_out
         for name in ("x0", "offset"):
             assert set(f[name]) >= {"value", "stderr", "unit", "status"}
         assert f["offset"]["status"] == "fitted" and f["offset"]["stderr"] > 0 and f["offset"]["unit"] == "s"
         assert f["x0"]["status"] == "fixed" and f["x0"]["stderr"] is None and f["x0"]["unit"] == "m"
-        assert f["offset"]["value"] == pytest.approx(entry["parameters"]["offset"]["value"])
+        assert f["offset"]["value"] == pytest.approx(entry.params["offset"].value)
         assert 0.9 < f["e_alone"]["value"] < 1.0 and f["e_alone"]["stderr"] > 0
         assert f["rms"]["unit"] == "s" and 0 < f["rms"]["value"] < 1e-3
-    assert sum(f["outliers"] for f in files) == sum(len(e["outliers"]) for e in result.datasets)
+    assert sum(f["outliers"] for f in files) == sum(len(e.outliers) for e in result.datasets)
 
 
 def _section(report: str, name: str) -> list[str]:
@@ -150,7 +150,7 @@ def test_one_file_report_keeps_its_variables(one):
 def test_every_printed_residual_has_a_unit(results, n):
     report = results[n].report()
     residual_lines = [line for line in report.splitlines() if "residual" in line and "outlier:" in line]
-    assert len(residual_lines) == sum(len(e["outliers"]) for e in results[n].datasets)
+    assert len(residual_lines) == sum(len(e.outliers) for e in results[n].datasets)
     for line in residual_lines:
         assert re.search(r"residual [-+]?[\d.]+(e[-+]?\d+)? (ms|mm)\b", line), line
     for line in (line for line in report.splitlines() if "missed bounce" in line):
@@ -167,13 +167,14 @@ def _absurd_numbers(text: str) -> list[str]:
 
 
 def test_unidentifiable_parameters_print_what_the_data_bound(one):
-    kappa = dict(one.parameters["kappa"], stderr=3.4e6, ci95=[1.9e-130, 3.8e138])
-    t_c = dict(one.derived["contact_time"], value=2e-5, stderr=3e-4, ci95=[1e-9, 3e-3])
+    kappa = dataclasses.replace(
+        one.params["kappa"], stderr=3.4e6, ci95=(1.9e-130, 3.8e138), identifiable=False
+    )
+    t_c = dataclasses.replace(
+        one.derived["contact_time"], value=2e-5, stderr=3e-4, ci95=(1e-9, 3e-3), identifiable=False
+    )
     result = dataclasses.replace(
-        one,
-        parameters={**one.parameters, "kappa": kappa},
-        derived={**one.derived, "contact_time": t_c},
-        identifiable={**one.identifiable, "kappa": False, "contact_time": False},
+        one, params={**one.params, "kappa": kappa}, derived={**one.derived, "contact_time": t_c}
     )
     report = result.report()
     assert _absurd_numbers(report) == []
@@ -207,13 +208,14 @@ def test_unidentifiable_parameters_print_what_the_data_bound(one):
     ],
 )
 def test_bound_rule(name, value, ci95, kind):
-    from identify._report._result import bound
+    from jaxunilat.identify._fit._estimate import Estimate, bound
 
-    b = bound(name, {"value": value, "ci95": ci95})
-    assert b["kind"] == kind
-    assert _absurd_numbers(b["text"]) == []
+    b = bound(name, value, ci95)
+    assert b.kind == kind
+    assert _absurd_numbers(b.text) == []
     if kind == "none":
-        assert b["text"].startswith("not bounded by the data")
+        assert b.text.startswith("not bounded by the data")
+    assert Estimate(name, value, 1.0, ci95).bound == b  # an estimate's bound is the same rule
 
 
 def _overlap(a, b) -> float:

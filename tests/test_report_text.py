@@ -9,15 +9,18 @@ runs), so every number in it is known.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 
 import numpy as np
 import pytest
+from jaxunilat.identify._fit._estimate import Estimate
+from jaxunilat.identify._fit._outcome import InitialGuess, StartRun
+from jaxunilat.identify._fit._problem import UNITS, to_z
+from jaxunilat.identify._report._result import FitResult, rounded
 
-import identify
-from identify._fit._problem import to_z
-from identify._report._result import FitResult, rounded
+from jaxunilat import identify
 
 KAPPA, K_R, E, T_C = 27097.8, 0.362588, 0.935008, 1.00094e-3
 
@@ -56,31 +59,29 @@ def _result(**changes) -> FitResult:
         kappa=KAPPA, k_r=K_R, drag=0.12, x0=0.305, v0=0.0, offset=0.0, scale=0.999928, level=2.42427e-5
     )
     errors = dict(kappa=434.4, k_r=0.004003, scale=1.409e-4, level=2.349e-5)
-    parameters = {
-        n: {
-            "value": v,
-            "stderr": errors.get(n, 0.0),
-            "ci95": [v - 1.96 * errors.get(n, 0.0), v + 1.96 * errors.get(n, 0.0)],
-        }
-        for n, v in values.items()
-    }
-    derived = {
-        "restitution": {"value": E, "stderr": 7.426e-6, "ci95": [E - 1.46e-5, E + 1.46e-5]},
-        "contact_time": {"value": T_C, "stderr": 1.121e-5, "ci95": [T_C - 2.2e-5, T_C + 2.2e-5]},
-    }
     free = ["kappa", "k_r", "scale", "level"]
+    params = {}
+    for n, v in values.items():
+        half = 1.96 * errors.get(n, 0.0)
+        verdict = True if n in ("kappa", "k_r") else None
+        params[n] = Estimate(n, v, errors.get(n, 0.0), (v - half, v + half), UNITS[n], n not in free, verdict)
+    derived = {
+        "restitution": Estimate("restitution", E, 7.426e-6, (E - 1.46e-5, E + 1.46e-5), identifiable=True),
+        "contact_time": Estimate(
+            "contact_time", T_C, 1.121e-5, (T_C - 2.2e-5, T_C + 2.2e-5), "s", identifiable=True
+        ),
+    }
     corr = np.array(
         [[1.0, 0.999987, 0.0999, -0.562274], [0.999987, 1.0, 0.0, -0.561883], [0.0999, 0.0, 1.0, -0.798794],
          [-0.562274, -0.561883, -0.798794, 1.0]]
     )  # fmt: skip
     fields = dict(
-        data=data, problem=None, z=to_z(values), free=free, parameters=parameters, derived=derived,
-        identifiable=dict(kappa=True, k_r=True, restitution=True, contact_time=True), correlation=corr,
+        data=data, problem=None, z=to_z(values), free=free, params=params, derived=derived, correlation=corr,
         cost=1330.0, residuals=np.zeros(21), chi2=2660.17, sigma=5e-4, sigma_source="file",
         goodness={"reduced_chi2": 1.06535, "dof": 2497, "p_value": 0.0116, "consistent": True},
         converged=True, message="relative change below tolerance", iterations=17, gradient_steps=0, method="lm",
-        starts=[{"cost": 476.9, "converged": True, "z": None}] * 3,
-        initial={"restitution": 0.9353, "source": "closed form (rebound heights)", "contact_time": 1e-3},
+        starts=[StartRun(cost=476.9, converged=True)] * 3,
+        initial=InitialGuess(restitution=0.9353, contact_time=1e-3, source="closed form (rebound heights)"),
         profile=None, rel_halfwidth=0.25, simulations=38, wall_s=6.69, used=np.ones(21, bool),
         datasets_data=[data], sigma_known=True,
     )  # fmt: skip
@@ -146,8 +147,8 @@ def test_results_come_first_then_nuisance_then_statistics_then_diagnostics():
 
 def test_a_fixed_kappa_or_k_r_shows_six_digits_and_fixed():
     result = _result(free=["kappa", "scale", "level"], correlation=np.eye(3))
-    result.parameters["k_r"] = {"value": 0.123456789, "stderr": 0.0, "ci95": [0.123456789] * 2}
-    result.identifiable["k_r"] = False
+    k_r = Estimate("k_r", 0.123456789, 0.0, (0.123456789,) * 2, "N*s/m", fixed=True, identifiable=False)
+    result = dataclasses.replace(result, params={**result.params, "k_r": k_r})
     row = next(r for r in _section(result.report(), "Results") if r.strip().startswith("k_r"))
     assert "k_r    = 0.123457 (fixed) N*s/m" in row and "identifiable: NO (held, not fitted)" in row
 
@@ -198,13 +199,14 @@ def test_the_fit_figure_names_kappa_only_where_the_data_carry_it():
     identifiable; otherwise it says they are not (never a number the data do not bound)."""
     from types import SimpleNamespace
 
-    from identify._report._plot import _title
+    from jaxunilat.identify._report._plot import _title
 
     def fit(identifiable):
         return SimpleNamespace(
-            parameters={"kappa": {"value": 26609.9}, "k_r": {"value": 0.3626}},
-            derived={"restitution": {"value": 0.935}},
+            params={"kappa": SimpleNamespace(value=26609.9), "k_r": SimpleNamespace(value=0.3626)},
+            derived={"restitution": SimpleNamespace(value=0.935)},
             law="kelvin-voigt",
+            units={"kappa": "N/m", "k_r": "N*s/m"},
             datasets_data=None,
             data=SimpleNamespace(path="data/drop_trace.csv"),
             identifiable=identifiable,

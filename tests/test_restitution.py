@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from bounce_reference import scipy_bounces, scipy_hunt_crossley
 
-import identify
 import jaxunilat
+from jaxunilat import identify
 
 matplotlib.use("Agg")
 

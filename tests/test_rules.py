@@ -1,8 +1,9 @@
 """The project's rules on its own source, checked on the parsed code (strings and
 comments do not count): short functions, a short top-level README, and the dependency
 rules that `jaxunilat/README.md` states ("Dependencies run one way"): the layers inside
-jaxunilat, jaxunilat never importing `identify`, and `identify` importing only
-jaxunilat's public names and `jaxunilat.internal`.
+jaxunilat, jaxunilat's engine never importing its subpackage `jaxunilat.identify` (whose
+source is the repository's top-level `identify/` folder), and identify importing only
+jaxunilat's public names and `jaxunilat._internal`.
 
 An import is every `import`/`from ... import` anywhere in a module (inside functions
 too), relative ones resolved, and `importlib.import_module("...")`/`__import__("...")`
@@ -25,15 +26,15 @@ MAX_FUNCTION_LINES = 150
 #: The top-level README's largest size, bytes (it is for users; design notes live beside the code).
 MAX_README_BYTES = 12 * 1024
 
-_CORE = {"internal", "_models", "_solver"}
+_CORE = {"_internal", "_models", "_solver"}
 _VIEWS = {"analysis", "plot", "debug"}
 #: What each part of jaxunilat may import of the others (`__init__`: the top-level package,
 #: `import jaxunilat` included), as jaxunilat/README.md states it. A part not listed fails
 #: the test: say where a new one sits, here and in the README.
 LAYERS = {
-    "internal": set(),
-    "_models": {"internal"},
-    "_solver": {"_models", "internal"},
+    "_internal": set(),
+    "_models": {"_internal"},
+    "_solver": {"_models", "_internal"},
     "analysis": _CORE,
     "plot": _CORE,
     "debug": _CORE,
@@ -61,8 +62,20 @@ def _tree(path: pathlib.Path) -> ast.Module:
 
 @functools.cache
 def imports(path: pathlib.Path) -> tuple[tuple[int, str], ...]:
-    """(line, absolute module name) of every import in a source file."""
-    return tuple(_imports_in(_tree(path), path.relative_to(ROOT).with_suffix("").parts))
+    """(line, absolute module name) of every import in a source file (identify/'s files are
+    modules of `jaxunilat.identify`, as installed)."""
+    return tuple(_imports_in(_tree(path), module_parts(path)))
+
+
+def module_parts(path: pathlib.Path) -> tuple[str, ...]:
+    """The dotted parts of the installed module a source file is (`__init__` for a package)."""
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ("jaxunilat", *parts) if parts[0] == "identify" else parts
+
+
+def is_identify(name: str) -> bool:
+    """Whether an imported module name is (in) `jaxunilat.identify`, or a bare `identify`."""
+    return name.split(".")[0] == "identify" or name.split(".")[:2] == ["jaxunilat", "identify"]
 
 
 def _imports_in(tree: ast.Module, module: tuple[str, ...]) -> list[tuple[int, str]]:
@@ -138,27 +151,40 @@ def test_the_top_level_readme_is_short_and_keeps_the_ci_commands():
 
 
 def test_jaxunilat_never_imports_identify():
-    """The packages depend one way: identify on jaxunilat. identify adds its commands and its
-    bench rows through entry points (`jaxunilat.commands`, `jaxunilat.bench`)."""
+    """The dependency runs one way: identify on jaxunilat's engine. The command line and the
+    bench name identify's commands and rows in their tables, as "module:function" strings
+    imported only when used; no module of jaxunilat imports identify."""
     offenders = [
         f"{_where(path, line)}: {name}"
         for path in _sources("jaxunilat")
         for line, name in imports(path)
-        if name.split(".")[0] == "identify"
+        if is_identify(name)
     ]
     assert offenders == []
 
 
 def test_identify_imports_no_private_jaxunilat_module():
-    """identify imports jaxunilat's public names and `jaxunilat.internal`, never a private
-    module (`jaxunilat._solver`, `jaxunilat.internal._io`, ...)."""
+    """identify imports jaxunilat's public names and `jaxunilat._internal`, never another
+    private module (`jaxunilat._solver`, `jaxunilat._internal._io`, ...)."""
     offenders = [
         f"{_where(path, line)}: {name}"
         for path in _sources("identify")
         for line, name in imports(path)
-        if name.split(".")[0] == "jaxunilat" and any(p.startswith("_") for p in name.split(".")[1:])
+        if private_of_jaxunilat(name)
     ]
     assert offenders == []
+
+
+def private_of_jaxunilat(name: str) -> bool:
+    """Whether a module name is private to jaxunilat's engine: under `jaxunilat`, not in
+    `jaxunilat.identify`, with a `_` part, and neither `jaxunilat._internal` nor one of its
+    public names."""
+    parts = name.split(".")
+    if parts[0] != "jaxunilat" or is_identify(name):
+        return False
+    if parts[1:2] == ["_internal"]:
+        return len(parts) > 2 and parts[2].startswith("_")
+    return any(p.startswith("_") for p in parts[1:])
 
 
 def test_identify_reads_only_public_names_of_jaxunilat():
@@ -183,8 +209,8 @@ def test_identify_reads_only_public_names_of_jaxunilat():
 
 
 def test_the_layers_inside_jaxunilat():
-    """Each part imports only the parts below it (`LAYERS`): `internal` nothing of the rest,
-    `_models` only `internal`, `_solver` only `_models` and `internal`, the views (`analysis`,
+    """Each part imports only the parts below it (`LAYERS`): `_internal` nothing of the rest,
+    `_models` only `_internal`, `_solver` only `_models` and `_internal`, the views (`analysis`,
     `plot`, `debug`) only the core, and nothing but `__main__` imports `_cli`."""
     offenders = []
     for path in _sources("jaxunilat"):
@@ -207,13 +233,18 @@ def test_the_import_parser_sees_every_form():
         "from . import _a\n"
         "from .._solver import simulate\n"
         "def f():\n"
-        "    from identify import fit\n"
+        "    from jaxunilat.identify import fit\n"
         "    importlib.import_module('identify._cli')\n"
         "    __import__('identify')\n"
     )
     names = [name for _, name in _imports_in(ast.parse(code), ("jaxunilat", "_models", "__init__"))]
     assert "jaxunilat._models._a" in names  # __init__.py: `.` is the package itself
     assert "jaxunilat._solver.simulate" in names
-    assert {"identify.x", "identify.fit", "identify._cli", "identify"} <= set(names)
+    assert {"identify.x", "jaxunilat.identify.fit", "identify._cli", "identify"} <= set(names)
+    assert all(is_identify(n) for n in ("identify.x", "jaxunilat.identify.fit", "identify"))
+    assert not is_identify("jaxunilat.identifying") and not private_of_jaxunilat(
+        "jaxunilat._internal.EXIT_OK"
+    )
+    assert private_of_jaxunilat("jaxunilat._internal._io") and private_of_jaxunilat("jaxunilat._solver")
     assert _imported_part("jaxunilat") == _imported_part("jaxunilat.simulate") == "__init__"
     assert _imported_part("jaxunilat._solver._simulate") == "_solver"

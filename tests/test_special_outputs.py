@@ -18,7 +18,7 @@ import pytest
 from test_output_paths import COMMANDS, DATA_DIR, FLAGS, _command_line
 
 from jaxunilat._cli._main import main
-from jaxunilat.internal import special_kind, write_atomically
+from jaxunilat._internal import special_kind, write_atomically
 
 #: Arguments that make a command run to the end on its test input (the collision test's
 #: rows need only get past the argument checks).
@@ -214,7 +214,7 @@ def test_an_output_directory_with_a_device_in_place_of_a_file(tmp_path, capsys):
 def test_the_executable_cache_never_opens_or_replaces_a_planted_fifo(tmp_path):
     """A FIFO at an entry's name: the call neither hangs reading it nor renames over it."""
     import jaxunilat as ju
-    from jaxunilat.internal._executables import disable_executable_cache, enable_executable_cache
+    from jaxunilat._internal._executables import disable_executable_cache, enable_executable_cache
 
     ball = ju.Ball.table1(2)
     run = lambda: ju.simulate(ball, ball.paper_initial_state(), 0.1, solver="event", samples=5, throw=False)  # noqa: E731

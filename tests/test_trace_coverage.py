@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from video_like import data_file_text, video_like_trace
 
-import identify
+from jaxunilat import identify
 
 SEEDS = range(100, 140)
 
@@ -41,10 +41,10 @@ def test_e_interval_covers_the_mean_restitution(fits):
     assert len(converged) >= 0.9 * len(fits), [r.message for _, r in fits if not r.converged]
     covered = []
     for rec, r in converged:
-        lo, hi = r.derived["restitution"]["ci95"]
+        lo, hi = r.derived["restitution"].ci95
         covered.append(lo <= rec.e_mean <= hi)
     misses = [
-        (rec.fps, rec.held, round(rec.e_mean, 4), np.round(r.derived["restitution"]["ci95"], 4).tolist())
+        (rec.fps, rec.held, round(rec.e_mean, 4), np.round(r.derived["restitution"].ci95, 4).tolist())
         for (rec, r), ok in zip(converged, covered, strict=True)
         if not ok
     ]
@@ -53,7 +53,7 @@ def test_e_interval_covers_the_mean_restitution(fits):
 
 @pytest.mark.slow
 def test_kappa_is_never_identifiable_from_video_rates(fits):
-    claimed = [(rec.fps, r.parameters["kappa"]["ci95"]) for rec, r in fits if r.identifiable["kappa"]]
+    claimed = [(rec.fps, r.params["kappa"].ci95) for rec, r in fits if r.identifiable["kappa"]]
     assert not claimed
     assert not any(r.identifiable["contact_time"] for _, r in fits)
 
@@ -66,4 +66,4 @@ def test_a_held_start_is_fitted_as_a_release_not_a_launch(fits):
     assert len(held) >= 10
     for rec, r in held:
         assert "v0" not in r.free
-        assert abs(r.parameters["offset"]["value"] - (rec.t[rec.held] - 0.5 / rec.fps)) < 2.0 / rec.fps
+        assert abs(r.params["offset"].value - (rec.t[rec.held] - 0.5 / rec.fps)) < 2.0 / rec.fps

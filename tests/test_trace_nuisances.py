@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from reference import BallParams, kelvin_voigt_restitution, scipy_reference
 
-import identify
+from jaxunilat import identify
 from jaxunilat._cli._main import main
 
 KAPPA, K_R, MASS, DRAG = 1.6e4, 0.15, 2.7e-3, 0.12
@@ -42,7 +42,7 @@ def _video(reference, seed, *, scale=SCALE, level=LEVEL, t1=3.0, source=None):
 
 
 def _covers(entry, truth):
-    lo, hi = entry["ci95"]
+    lo, hi = entry.ci95
     return lo <= truth <= hi
 
 
@@ -52,8 +52,8 @@ def test_free_scale_and_level_recover_the_calibration_and_e_frozen_ones_bias_it(
     print("\n" + free.report())
     assert free.converged, free.message
     assert {"scale", "level"} <= set(free.free)  # fitted by default for a trace
-    assert _covers(free.parameters["scale"], SCALE), free.parameters["scale"]
-    assert _covers(free.parameters["level"], LEVEL), free.parameters["level"]
+    assert _covers(free.params["scale"], SCALE), free.params["scale"]
+    assert _covers(free.params["level"], LEVEL), free.params["level"]
     e = free.derived["restitution"]
     assert _covers(e, E_TRUE), (e, E_TRUE)
     assert free.goodness["consistent"] is True
@@ -64,22 +64,22 @@ def test_free_scale_and_level_recover_the_calibration_and_e_frozen_ones_bias_it(
     held = identify.fit(data, starts=1, freeze=("scale", "level"))
     print("\n" + held.report())
     assert "scale" not in held.free and "level" not in held.free
-    assert held.parameters["scale"]["value"] == 1.0 and held.parameters["level"]["value"] == 0.0
+    assert held.params["scale"].value == 1.0 and held.params["level"].value == 0.0
     assert held.goodness["consistent"] is False
-    bias = held.derived["restitution"]["value"] - E_TRUE
-    print(f"e: free {e['value']:.5f} +/- {e['stderr']:.5f}, held {held.derived['restitution']['value']:.5f}, "
-          f"truth {E_TRUE:.5f}, bias {bias:+.5f}; t_c held {held.derived['contact_time']['value'] * 1e3:.3g} ms")  # fmt: skip
+    bias = held.derived["restitution"].value - E_TRUE
+    print(f"e: free {e.value:.5f} +/- {e.stderr:.5f}, held {held.derived['restitution'].value:.5f}, "
+          f"truth {E_TRUE:.5f}, bias {bias:+.5f}; t_c held {held.derived['contact_time'].value * 1e3:.3g} ms")  # fmt: skip
     # (e's interval counts the trace's few bounces, so it is no yardstick for a bias here.)
-    assert abs(bias) > 5.0 * abs(e["value"] - E_TRUE)
-    assert held.derived["contact_time"]["value"] < 0.3e-3
+    assert abs(bias) > 5.0 * abs(e.value - E_TRUE)
+    assert held.derived["contact_time"].value < 0.3e-3
 
 
 def test_scale_and_level_columns_are_closed_form_and_take_no_runs(reference):
     """level + scale · x_model: the level's column is 1/σ and the scale's x_model/σ, read
     off the point's own run; checked against central differences of explicit runs, and
     only κ and k_r take runs (5 per call)."""
-    from identify._fit._problem import PARAMETERS, evaluate_rows, to_z
-    from identify._fit._setup import build
+    from jaxunilat.identify._fit._problem import PARAMETERS, evaluate_rows, to_z
+    from jaxunilat.identify._fit._setup import build
 
     data = _video(reference, seed=3, t1=1.2)
     setup = build(
@@ -105,8 +105,8 @@ def test_scale_and_level_columns_are_closed_form_and_take_no_runs(reference):
 
 
 def test_measured_calibration_is_held_and_freeze_is_respected(reference):
-    from identify._fit._options import default_nuisance
-    from identify._fit._setup import build
+    from jaxunilat.identify._fit._options import default_nuisance
+    from jaxunilat.identify._fit._setup import build
 
     data = _video(reference, seed=4, t1=1.2)
 

@@ -20,12 +20,13 @@ import pytest
 
 av = pytest.importorskip("av", reason="PyAV (the video extra) is not installed")
 
-from identify._data._import import ImplausibleRecording  # noqa: E402
-from identify._data._video_decode import decode, display_rotation, is_video_file, require_av  # noqa: E402
-from identify._data._video_repeats import find_repeats  # noqa: E402
-from identify._data._video_trace import import_video_clip, trace_video  # noqa: E402
-from identify._report._plot_video import plot_video_contact_sheet, plot_video_trace  # noqa: E402
-from jaxunilat.internal import InputError  # noqa: E402
+from jaxunilat.identify._data._import import ImplausibleRecording  # noqa: E402
+from jaxunilat.identify._data._video_decode import decode, display_rotation, is_video_file, require_av  # noqa: E402
+from jaxunilat.identify._data._video_repeats import find_repeats  # noqa: E402
+from jaxunilat.identify._data._video_trace import import_video_clip, trace_video  # noqa: E402
+from jaxunilat.identify._report._plot_video import plot_video_contact_sheet, plot_video_trace  # noqa: E402
+
+from jaxunilat._internal import InputError  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 REAL = os.path.normpath(os.path.join(ROOT, os.pardir, "shared", "real-recordings", "video"))

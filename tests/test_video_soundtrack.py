@@ -25,11 +25,11 @@ import pytest
 av = pytest.importorskip("av", reason="PyAV (the video extra) is not installed")
 
 from helpers import fifo_errors  # noqa: E402
+from jaxunilat.identify import import_video, import_wav, load_dataset  # noqa: E402
+from jaxunilat.identify._data._format import MAX_DATA_BYTES, NOISE_RANGE  # noqa: E402
+from jaxunilat.identify._data._import import ratio_chain  # noqa: E402
+from jaxunilat.identify._data._import_video import sound_agreement, with_soundtrack  # noqa: E402
 
-from identify import import_video, import_wav, load_dataset  # noqa: E402
-from identify._data._format import MAX_DATA_BYTES, NOISE_RANGE  # noqa: E402
-from identify._data._import import ratio_chain  # noqa: E402
-from identify._data._import_video import sound_agreement, with_soundtrack  # noqa: E402
 from jaxunilat._cli._main import main  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -312,7 +312,7 @@ def test_real_pingpong_soundtrack_matches_the_picture_after_its_clock_offset(tmp
     before the picture's impacts (a screen recording's audio latency), within a frame after
     that offset; its 5 chain onsets are a minority of 24 candidate clicks, which alone the
     audio's gate refuses, but every one falls on an impact of the picture: kept."""
-    from identify._data._balls import ball_spec
+    from jaxunilat.identify._data._balls import ball_spec
 
     path = _real("zak_pingpong.mov")
     result = import_video(path, ball="pingpong", soundtrack=True)
@@ -421,14 +421,14 @@ def test_wrote_lines_escape_control_characters(tmp_path, capsys, pictures):
 def test_a_contradiction_prints_a_wild_e_in_bounded_width(monkeypatch):
     from types import SimpleNamespace
 
-    from identify._fit import _plausible
+    from jaxunilat.identify._fit import _plausible
 
     form = _plausible.ClosedForm(restitution=0.9349, spread=0.001, count=8, first=None, launch=math.nan)
     monkeypatch.setattr(_plausible, "_forms", lambda result: [form, form])
     monkeypatch.setattr(_plausible, "_basin_misses", lambda result, forms: [(0, 1e170, 0.03)])
     data = SimpleNamespace(path="drop.csv")
     result = SimpleNamespace(
-        datasets_data=[data, data], free=("e",), derived={"restitution": {"value": 1e170}}
+        datasets_data=[data, data], free=("e",), derived={"restitution": SimpleNamespace(value=1e170)}
     )  # fmt: skip
     found = _plausible.contradictions(result)
     assert any("the fit's e = 1e+170 contradicts the e = 0.9349" in line for line in found), found

@@ -36,10 +36,9 @@ import pytest
 
 av = pytest.importorskip("av", reason="PyAV (the video extra) is not installed")
 
+from jaxunilat.identify._data._video_repeats import source_grid  # noqa: E402
+from jaxunilat.identify._data._video_trace import trace_video  # noqa: E402
 from video_like import ClipSpec, render_clip  # noqa: E402
-
-from identify._data._video_repeats import source_grid  # noqa: E402
-from identify._data._video_trace import trace_video  # noqa: E402
 
 #: The clips: every frame rate, container and orientation the brief lists, each with the hand,
 #: the shadows, blur, rolling shutter, noise, perspective and compression (seed 0).
@@ -94,7 +93,7 @@ def _still(truth, limit: float = 1.0) -> set[int]:
 def test_clips_are_as_specified(clip):
     """The files hold what the specification says: codec, size and rotation as displayed,
     modest compression, the frame schedule."""
-    from identify._data._video_decode import decode
+    from jaxunilat.identify._data._video_decode import decode
 
     name, truth, _ = clip
     spec = truth.spec

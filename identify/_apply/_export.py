@@ -58,7 +58,7 @@ import os
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
-from jaxunilat.internal import InputError, check_choice, check_range, printable, shown
+from jaxunilat._internal import InputError, check_choice, check_range, printable, shown
 
 from ._fit_json import check_fit_value, finite_number, parse_json
 

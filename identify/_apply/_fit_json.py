@@ -16,7 +16,7 @@ import math
 import os
 import re
 
-from jaxunilat.internal import InputError, shown
+from jaxunilat._internal import InputError, shown
 
 #: The deepest nesting of arrays and objects a fit's JSON may have: its own is 4 deep.
 MAX_DEPTH = 64

@@ -33,7 +33,7 @@ import os
 
 import numpy as np
 
-from jaxunilat.internal import InputError, check_range, latency_bound, shown
+from jaxunilat._internal import InputError, check_range, latency_bound, shown
 
 from ._fit_json import as_float, check_fit_value, read_json
 

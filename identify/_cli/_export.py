@@ -13,7 +13,7 @@ import sys
 
 def register(commands) -> None:
     """Add `export` (with its target `mujoco`) to the `jaxunilat` subparsers (the
-    `jaxunilat.commands` entry point)."""
+    line of `jaxunilat._cli._main.COMMANDS`)."""
     p = commands.add_parser(
         "export",
         help="export identified contact parameters to another simulator",
@@ -58,7 +58,7 @@ def register(commands) -> None:
 
 
 def _run_export_mujoco(args) -> int:
-    from jaxunilat.internal import EXIT_OK, PROG, bounded_numbers, printable
+    from jaxunilat._internal import EXIT_OK, PROG, bounded_numbers, printable
 
     from .. import DEFAULT_IMPEDANCE, mujoco_contact
 

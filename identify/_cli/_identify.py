@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from jaxunilat.internal import EXIT_NOT_CONVERGED, InputError
+from jaxunilat._internal import EXIT_NOT_CONVERGED, InputError
 
 
 def default_data_path() -> str:
     """The bundled default data set, `data/drop_trace.csv` (a synthetic 1 kHz drop test)."""
-    from jaxunilat.internal import bundled_data
+    from jaxunilat._internal import bundled_data
 
     found = bundled_data("drop_trace.csv")
     if found:
@@ -19,7 +19,7 @@ def default_data_path() -> str:
 
 
 def register(commands) -> None:
-    """Add `identify` to the `jaxunilat` subparsers (the `jaxunilat.commands` entry point)."""
+    """Add `identify` to the `jaxunilat` subparsers (a line of `jaxunilat._cli._main.COMMANDS`)."""
     p = commands.add_parser(
         "identify",
         help="fit contact stiffness kappa and damping k_r to rebound data, with uncertainty",
@@ -116,7 +116,7 @@ def _names(text: str, flag: str, valid, what: str) -> tuple[str, ...]:
 
 def _checked_arguments(args) -> tuple[tuple[str, ...], tuple[str, ...], list[str]]:
     """`--fit`, `--freeze` and the data paths, checked with the outputs before any work."""
-    from jaxunilat.internal import check_output_paths, check_plot_format, check_range, input_errors
+    from jaxunilat._internal import check_output_paths, check_plot_format, check_range, input_errors
 
     from .. import NUISANCE, PARAMETERS
 
@@ -137,9 +137,10 @@ def _checked_arguments(args) -> tuple[tuple[str, ...], tuple[str, ...], list[str
 
 
 def _run_identify(args) -> int:
+    import dataclasses
     import json
 
-    from jaxunilat.internal import input_errors, output_errors, printable, write_atomically
+    from jaxunilat._internal import input_errors, output_errors, printable, write_atomically
 
     from .. import fit, load_dataset
 
@@ -161,7 +162,7 @@ def _run_identify(args) -> int:
         outlier_threshold=args.outlier_threshold,
         holdout=args.holdout,
     )
-    result.notes[:0] = [o["note"] for o in overrides.values()]
+    result = dataclasses.replace(result, notes=(*(o["note"] for o in overrides.values()), *result.notes))
     print(_terminal(result.report()))
     if args.json is not None:
         doc = result.to_json_dict()
@@ -187,7 +188,7 @@ def _run_identify(args) -> int:
 def _terminal(text: str) -> str:
     """`text` line by line as the terminal gets it: control characters (a file name's
     escape bytes) escaped, numbers of more than 16 digits shortened (a wild fit's e)."""
-    from jaxunilat.internal import bounded_numbers, printable
+    from jaxunilat._internal import bounded_numbers, printable
 
     return "\n".join(bounded_numbers(printable(line)) for line in text.split("\n"))
 
@@ -219,7 +220,7 @@ def _overridden(data: list, **values) -> tuple[list, dict]:
 
 def _verdict(result) -> int:
     """Print why a fit failed, if it did; its exit status (0, or 3 for a failed fit)."""
-    from jaxunilat.internal import EXIT_OK
+    from jaxunilat._internal import EXIT_OK
 
     if result.contradictions:
         for reason in result.contradictions:

@@ -36,7 +36,7 @@ module adds the options they all take and runs the import, the report and the fi
 
 from __future__ import annotations
 
-from jaxunilat.internal import EXIT_NOT_CONVERGED
+from jaxunilat._internal import EXIT_NOT_CONVERGED
 
 from .. import AIR_DENSITY, BALLS
 from .._data._registry import IMPORTERS
@@ -117,7 +117,7 @@ def _bounds() -> str:
 
 def register(commands) -> None:
     """Add `import` (with one source kind per importer of `IMPORTERS`: `wav`, `phyphox`,
-    `video`) to the `jaxunilat` subparsers (the `jaxunilat.commands` entry point)."""
+    `video`) to the `jaxunilat` subparsers (a line of `jaxunilat._cli._main.COMMANDS`)."""
     p = commands.add_parser(
         "import",
         help="turn a recording (audio, phyphox export, video, video-tracking CSV) into a data file",
@@ -146,7 +146,7 @@ def _ball_options(args) -> dict:
 def _plot_import(result, args) -> None:
     """Draw what was imported into --plot, by what the import found: an audio detection's
     envelope and onsets, a clip's trace and contact sheet, or a table's import."""
-    from jaxunilat.internal import printable
+    from jaxunilat._internal import printable
     from jaxunilat.plot import save_figure
 
     from .. import OnsetDetection
@@ -171,7 +171,7 @@ def sheet_path(plot: str) -> str:
 def _plot_clip(trace, plot: str) -> None:
     """A clip's trace figure into `plot` and its contact sheet (the frames with the track
     drawn on them) beside it."""
-    from jaxunilat.internal import printable
+    from jaxunilat._internal import printable
     from jaxunilat.plot import save_figure
 
     from .._report._plot_video import plot_video_contact_sheet, plot_video_trace
@@ -188,7 +188,7 @@ def _refused(err, args) -> int:
     import dataclasses
     import sys
 
-    from jaxunilat.internal import PROG, output_errors, printable
+    from jaxunilat._internal import PROG, output_errors, printable
 
     if err.result is not None:
         print(dataclasses.replace(err.result, problems=()).summary())
@@ -210,7 +210,7 @@ def _imported(args):
     """The import of SOURCE by its importer (`Importer.run`), or the `ImplausibleRecording`
     that refused it; any other complaint about the recording or the flags is bad input
     (exit 2)."""
-    from jaxunilat.internal import input_errors
+    from jaxunilat._internal import input_errors
 
     from .. import ImplausibleRecording
 
@@ -222,7 +222,7 @@ def _imported(args):
 
 
 def _run_import(args) -> int:
-    from jaxunilat.internal import (
+    from jaxunilat._internal import (
         EXIT_OK,
         InputError,
         check_output_paths,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 
 def register(commands) -> None:
-    """Add `qualify` to the `jaxunilat` subparsers (the `jaxunilat.commands` entry point)."""
+    """Add `qualify` to the `jaxunilat` subparsers (a line of `jaxunilat._cli._main.COMMANDS`)."""
     from .. import DEFAULT_DRAG, DEFAULT_SAMPLES, ITTF_DROP, ITTF_MASS, ITTF_MAX, ITTF_MIN
 
     p = commands.add_parser(
@@ -61,7 +61,7 @@ def register(commands) -> None:
 def _checked_arguments(args) -> None:
     """Refuse FIT.json together with --kappa/--k-r, neither, or only one of the two, a
     negative --seed, and bad outputs, before any work."""
-    from jaxunilat.internal import InputError, UsageError, check_output_paths, input_errors
+    from jaxunilat._internal import InputError, UsageError, check_output_paths, input_errors
 
     given = args.kappa is not None or args.k_r is not None
     if args.fit is not None and given:
@@ -79,7 +79,7 @@ def _checked_arguments(args) -> None:
 def _unconverged(path) -> str | None:
     """Why the fit in `path` is refused: it says it did not converge (`converged: false`);
     None for a fit that converged (or does not say)."""
-    from jaxunilat.internal import printable
+    from jaxunilat._internal import printable
 
     from .._apply._qualify import load_fit
 
@@ -97,7 +97,7 @@ def _run_qualify(args) -> int:
     import sys
     import time
 
-    from jaxunilat.internal import (
+    from jaxunilat._internal import (
         EXIT_NOT_CONVERGED,
         EXIT_OK,
         PROG,

@@ -46,7 +46,7 @@ import warnings
 
 import numpy as np
 
-from jaxunilat.internal import InputError
+from jaxunilat._internal import InputError
 
 from ._source import regular_source
 

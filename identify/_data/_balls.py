@@ -44,7 +44,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from jaxunilat.internal import InputError
+from jaxunilat._internal import InputError
 
 from ._format import DEFAULT_GRAVITY
 
@@ -221,7 +221,7 @@ def ball_spec(
     `mass` and one of `diameter` or `drag` are needed. An `InputError` says what is missing,
     in the command line's flags with `cli`.
     """
-    from jaxunilat.internal import check_range
+    from jaxunilat._internal import check_range
 
     check_range("mass", mass, lo=0.0, lo_open=True, unit="kg", allow_none=True)
     check_range("diameter", diameter, lo=0.0, lo_open=True, unit="m", allow_none=True)

@@ -50,7 +50,7 @@ import re
 
 import numpy as np
 
-from jaxunilat.internal import InputError, printable, shown, special_kind, write_atomically
+from jaxunilat._internal import InputError, printable, shown, special_kind, write_atomically
 
 #: The format version this module reads and writes.
 FORMAT_VERSION = 1

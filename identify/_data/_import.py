@@ -17,7 +17,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from jaxunilat.internal import InputError
+from jaxunilat._internal import InputError
 
 from ._balls import BallSpec, ball_spec
 from ._format import (
@@ -139,7 +139,7 @@ class ImportResult:
     def write(self, path, *, overwrite: bool = False) -> None:
         """Write `text()` to `path` (refuses to replace a file unless `overwrite`, and
         never writes over the source)."""
-        from jaxunilat.internal import check_output_paths
+        from jaxunilat._internal import check_output_paths
 
         name = os.fspath(path)
         check_output_paths(("path", name), inputs=(("source", self.source),))
@@ -217,7 +217,7 @@ def check_options(*, ball, mass, diameter, drag, air_density, x0, v0, noise, obs
     return the ball's mass and drag (`ball_spec`: the ball must be stated). `noise` must be
     > 0 and, given the import's `observe` ("impacts": s; "trace", "apex": m), within the
     data format's `NOISE_RANGE` for it (`check_noise`)."""
-    from jaxunilat.internal import check_range
+    from jaxunilat._internal import check_range
 
     spec = ball_spec(ball, mass=mass, diameter=diameter, drag=drag, air_density=air_density)
     check_range("x0", x0, lo=0.0, unit="m", allow_none=True)

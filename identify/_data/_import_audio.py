@@ -39,7 +39,7 @@ import os
 
 import numpy as np
 
-from jaxunilat.internal import InputError
+from jaxunilat._internal import InputError
 
 from ._audio_read import RATE_RANGE as RATE_RANGE, WavAudio as WavAudio, read_audio
 from ._balls import BallSpec
@@ -411,7 +411,7 @@ def detect_onsets(
 
     **Returns:** an `OnsetDetection` (every candidate, kept or left out).
     """
-    from jaxunilat.internal import check_range
+    from jaxunilat._internal import check_range
 
     given = dict(threshold=threshold, rise=rise, dead_time=dead_time, min_gap=min_gap)
     given.update(rel_level=rel_level, noise_level=noise_level)

@@ -19,7 +19,7 @@ import re
 
 import numpy as np
 
-from jaxunilat.internal import InputError
+from jaxunilat._internal import InputError
 
 from ._format import DEFAULT_GRAVITY
 from ._import import (

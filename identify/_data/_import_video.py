@@ -16,7 +16,7 @@ import os
 
 import numpy as np
 
-from jaxunilat.internal import InputError
+from jaxunilat._internal import InputError
 
 from ._balls import ball_spec
 from ._import import (
@@ -167,7 +167,7 @@ def _import_tracking_table(
     path, *, column, scale, ball_keywords, x0, v0, noise, fps, flip, floor, measured, force
 ) -> ImportResult:
     """`import_video` of a tracking table (the arguments as there)."""
-    from jaxunilat.internal import check_range
+    from jaxunilat._internal import check_range
 
     spec = check_options(**ball_keywords, x0=x0, v0=v0, noise=noise, observe="trace")
     check_range("scale", scale, lo=0.0, lo_open=True, unit="m per unit", allow_none=True)

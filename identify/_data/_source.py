@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 import stat
 
-from jaxunilat.internal import InputError, mode_kind, printable
+from jaxunilat._internal import InputError, mode_kind, printable
 
 #: A byte count in words for messages: the unit and its size in bytes.
 _UNITS = (("GB", 1e9), ("MB", 1e6), ("kB", 1e3))

@@ -29,7 +29,7 @@ import dataclasses
 import math
 import re
 
-from jaxunilat.internal import InputError
+from jaxunilat._internal import InputError
 
 from ._import import ImportResult, Rejected
 from ._source import read_source, size_text

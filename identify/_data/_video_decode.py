@@ -16,7 +16,7 @@ import struct
 
 import numpy as np
 
-from jaxunilat.internal import InputError
+from jaxunilat._internal import InputError
 
 #: The longer side of the working frames, px (the source is reduced to it, never enlarged).
 WORK_SIDE = 480

@@ -35,7 +35,7 @@ import os
 
 import numpy as np
 
-from jaxunilat.internal import InputError
+from jaxunilat._internal import InputError
 
 from ._format import DEFAULT_GRAVITY
 from ._import import ImplausibleRecording, ImportResult, Rejected, check_options, drop_dataset
@@ -178,7 +178,7 @@ def trace_video(
     **Returns:** a `VideoTrace`. `InputError` for an unreadable file or no ball in free
     flight; `ImplausibleRecording` (a `ValueError`) when the scales disagree, unless `force`.
     """
-    from jaxunilat.internal import check_range
+    from jaxunilat._internal import check_range
 
     check_range("diameter", diameter, lo=0.0, lo_open=True, unit="m", allow_none=True)
     check_range("gravity", gravity, lo=0.0, lo_open=True, unit="m/s^2")

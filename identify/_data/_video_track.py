@@ -44,7 +44,7 @@ import math
 import numpy as np
 from scipy import ndimage
 
-from jaxunilat.internal import InputError
+from jaxunilat._internal import InputError
 
 from ._video_decode import Frames
 from ._video_repeats import Repeats, find_repeats

@@ -4,14 +4,15 @@ t_c (with their standard errors) for the fit's law."""
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 
-from jaxunilat.internal import check_choice
+from jaxunilat import KelvinVoigt
 
 from ._joint import contact_time_of
 from ._kelvin_voigt import restitution_and_contact_time
-from ._problem import PARAMETERS
+from ._problem import LAW_MODELS, PARAMETERS
 from ._uncertainty import summarize
 
 
@@ -24,44 +25,69 @@ def view(setup, z: np.ndarray, cov: np.ndarray, f: int = 0):
 
 
 def law_derived(setup):
-    """(log κ, log k_r, mass) → (e, t_c, ∂e/∂u, ∂log t_c/∂u) for the fit's law.
+    """(log κ, log k_r, mass) → (e, t_c, ∂e/∂u, ∂log t_c/∂u) for the fit's law, u = (log κ,
+    log k_r).
 
-    Kelvin–Voigt: the closed forms (no gravity). Hunt–Crossley: e of one impact at the
-    data's typical impact speed (simulated as in `law_restitution`; gradient by central
-    differences, step 1e-4 in the logs) and the undamped Hertz contact time there. A law
-    without an entry in `_DERIVED` raises `ValueError` naming it.
+    A law whose e and t_c do not depend on the impact speed: its closed forms (no
+    gravity), Kelvin–Voigt's with exact gradients (`_kelvin_voigt`), any other's on the
+    host (`xp=numpy`) with central differences. A law whose e depends on the speed: e of
+    one impact at the data's typical impact speed (simulated as in `law_restitution`;
+    central differences) and the undamped contact time there (`contact_time_of`).
     """
-    check_choice("law", setup.law, tuple(_DERIVED))
-    return _DERIVED[setup.law](setup)
+    model = LAW_MODELS[setup.law]
+    if model.restitution_depends_on_speed:
+        return _simulated(setup)
+    if type(model) is KelvinVoigt:
+        return restitution_and_contact_time
+    return functools.partial(_closed_forms, model)
 
 
-def _hunt_crossley_derived(setup):
-    """Hunt–Crossley's (e, t_c, ∂e/∂u, ∂log t_c/∂u) at the data's typical impact speed
-    (see `law_derived`); ∂log t_c/∂log κ = −1/(n + 1) with n = 3/2."""
-    speed, g = setup.speed, float(setup.datasets[0].gravity)
+def _closed_forms(model, lk: float, lr: float, mass: float):
+    """A speed-independent law's (e, t_c, ∂e/∂u, ∂log t_c/∂u) from its closed forms on the
+    host; an impact with no rebound (e = 0, t_c = inf) has zero gradients."""
+
+    def at(u):
+        kappa, k_r = math.exp(u[0]), math.exp(u[1])
+        e = float(model.restitution(kappa, k_r, mass, None, xp=np))
+        return e, float(model.contact_time(kappa, k_r, mass, None, xp=np))
+
+    u = np.array([float(lk), float(lr)])
+    e, t_c = at(u)
+    if not (e > 0 and math.isfinite(t_c)):
+        return e, t_c, np.zeros(2), np.zeros(2)
+    grad_e, grad_log_tc = np.zeros(2), np.zeros(2)
+    for i in range(2):
+        step = np.eye(2)[i] * _CLOSED_STEP
+        (e_up, t_up), (e_down, t_down) = at(u + step), at(u - step)
+        grad_e[i] = (e_up - e_down) / (2 * _CLOSED_STEP)
+        grad_log_tc[i] = (math.log(t_up) - math.log(t_down)) / (2 * _CLOSED_STEP)
+    return e, t_c, grad_e, grad_log_tc
+
+
+def _simulated(setup):
+    """A speed-dependent law's (e, t_c, ∂e/∂u, ∂log t_c/∂u) at the data's typical impact
+    speed (see `law_derived`); ∂log t_c/∂u of the undamped time by central differences
+    (for Hunt–Crossley, −1/(n + 1) in log κ and 0 in log k_r)."""
+    law, speed, g = setup.law, setup.speed, float(setup.datasets[0].gravity)
 
     def derived(lk, lr, mass):
-        e, ge = _hunt_crossley_restitution(float(lk), float(lr), float(mass), speed, g)
-        t_c = contact_time_of("hunt-crossley", lk, lr, mass, speed)
-        return e, t_c, ge.copy(), np.array([-1.0 / 2.5, 0.0])
+        e, ge = _simulated_restitution(law, float(lk), float(lr), float(mass), speed, g)
+        t_c = contact_time_of(law, lk, lr, mass, speed)
+        up, down = (contact_time_of(law, lk + d, lr, mass, speed) for d in (_CLOSED_STEP, -_CLOSED_STEP))
+        return e, t_c, ge.copy(), np.array([(math.log(up) - math.log(down)) / (2 * _CLOSED_STEP), 0.0])
 
     return derived
 
 
-#: Each law's derived quantities, by the fit's law name: the closed forms for
-#: Kelvin–Voigt, simulated impacts for Hunt–Crossley.
-_DERIVED = {
-    "kelvin-voigt": lambda setup: restitution_and_contact_time,
-    "hunt-crossley": _hunt_crossley_derived,
-}
-
-#: Central-difference step (in log κ, log k_r) of Hunt–Crossley's ∂e/∂(log κ, log k_r).
+#: Central-difference step (in log κ, log k_r) of a closed form's gradient.
+_CLOSED_STEP = 1e-5
+#: Central-difference step (in log κ, log k_r) of a simulated e's gradient.
 _E_STEP = 1e-4
 
 
 @functools.lru_cache(maxsize=256)
-def _hunt_crossley_restitution(lk: float, lr: float, mass: float, speed: float, gravity: float):
-    """Hunt–Crossley's e at `speed` (m/s) and its gradient in (log κ, log k_r).
+def _simulated_restitution(law: str, lk: float, lr: float, mass: float, speed: float, gravity: float):
+    """The law's e at `speed` (m/s) and its gradient in (log κ, log k_r).
 
     The point and its four neighbours are one batch of simulated impacts
     (`law_restitution`'s program, rtol 1e-12). Cached: the files of a joint fit share κ,
@@ -72,7 +98,7 @@ def _hunt_crossley_restitution(lk: float, lr: float, mass: float, speed: float, 
     h = _E_STEP
     lks = lk + np.array([0.0, h, -h, 0.0, 0.0])
     lrs = lr + np.array([0.0, 0.0, 0.0, h, -h])
-    e, _ = _impact_rows("hunt-crossley", np.exp(lks), np.exp(lrs), np.full(5, speed), mass, gravity, 1e-12)
+    e, _ = _impact_rows(law, np.exp(lks), np.exp(lrs), np.full(5, speed), mass, gravity, 1e-12)
     e = np.asarray(e, dtype=float)
     return float(e[0]), np.array([(e[1] - e[2]) / (2 * h), (e[3] - e[4]) / (2 * h)])
 

@@ -37,11 +37,11 @@ import math
 import jax
 import numpy as np
 
-from jaxunilat import hunt_crossley_contact_time
-from jaxunilat.internal import kept_call
+from jaxunilat import NoClosedFormError
+from jaxunilat._internal import kept_call
 
 from ._initial import CONTACT_TIME_GUESS
-from ._problem import PARAMETERS, Problem, evaluate_rows, stack_problems
+from ._problem import LAW_MODELS, PARAMETERS, Problem, evaluate_rows, stack_problems
 
 #: Parameters that shift every prediction of impact onsets by their own value (onsets +
 #: offset): their Jacobian column is 1/σ exactly, so they take no runs (traces: differenced).
@@ -349,14 +349,15 @@ def _no_jacobian(n: int) -> np.ndarray:
 def contact_time_of(
     law: str, log_kappa: float, log_k_r: float, mass: float, speed: float, *, floor: bool = False
 ) -> float:
-    """Contact time, s, of the law at (κ, k_r): Kelvin–Voigt's π/ω_d (inf when
-    overdamped, or finite and huge with `floor`: ω_d² ≥ 1e-300, so that the prior's
-    residual and its difference quotient stay finite); Hunt–Crossley's undamped Hertz
-    time at impact speed `speed` (m/s)."""
+    """Contact time, s, of the law at (κ, k_r), on the host: the law's closed form
+    (`contact_time` with numpy), or where damping has none (Hunt–Crossley) its undamped
+    time at impact speed `speed` (m/s). A contact with no time (Kelvin–Voigt overdamped:
+    inf) is, with `floor`, finite and huge (π/√1e-300, as if ω_d² = 1e-300), so that
+    the prior's residual and its difference quotient stay finite."""
+    model = LAW_MODELS[law]
     kappa, k_r = math.exp(log_kappa), math.exp(log_k_r)
-    if law == "hunt-crossley":
-        return hunt_crossley_contact_time(kappa, mass, speed)
-    omega2 = kappa / mass - (k_r / (2 * mass)) ** 2
-    if floor:
-        omega2 = max(omega2, 1e-300)
-    return math.pi / math.sqrt(omega2) if omega2 > 0 else math.inf
+    try:
+        t_c = float(model.contact_time(kappa, k_r, mass, speed, xp=np))
+    except NoClosedFormError:
+        return float(model.contact_time(kappa, None, mass, speed, xp=np))
+    return math.pi / math.sqrt(1e-300) if floor and not math.isfinite(t_c) else t_c

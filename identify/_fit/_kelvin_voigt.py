@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from jaxunilat.internal import check_range
+from jaxunilat._internal import check_range
 
 
 def parameters_from_restitution(e: float, t_c: float, mass: float) -> tuple[float, float]:

@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 import optax
 
-from jaxunilat.internal import InputError, check_choice, check_range
+from jaxunilat._internal import InputError, check_choice, check_range
 
 from ._problem import LOG_PARAMETERS, NUISANCE, PARAMETERS, TRACE_ONLY
 from ._robust import fitted_count

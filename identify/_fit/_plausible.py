@@ -18,6 +18,9 @@ import os
 
 import numpy as np
 
+from ._outcome import FitOutcome
+from ._problem import LAW_MODELS
+
 #: The fewest onsets from which a file's closed-form e is trusted (3 flights).
 MIN_ONSETS = 4
 #: The least disagreement in e that counts as a contradiction (drag and contact-time
@@ -91,7 +94,9 @@ def closed_form(d, rows: int | None = None) -> ClosedForm | None:
 
 
 def _tolerance(law: str, form: ClosedForm) -> float:
-    base = E_TOLERANCE if law == "kelvin-voigt" else E_TOLERANCE_SPEED_DEPENDENT
+    """How far a fitted e may lie from the closed form: wider for a law whose e depends on
+    the impact speed (its e is the one at the data's typical speed)."""
+    base = E_TOLERANCE_SPEED_DEPENDENT if LAW_MODELS[law].restitution_depends_on_speed else E_TOLERANCE
     return max(base, 4.0 * form.standard_error)
 
 
@@ -100,7 +105,7 @@ def _name(d, f: int) -> str:
 
 
 def contradictions(result) -> list[str]:
-    """Why `result` (an `identify.FitResult`) contradicts its data's closed forms; [].
+    """Why `result` (a `FitOutcome`) contradicts its data's closed forms; [].
 
     Per file of impact onsets: the fitted e (the file's own "alone" e in a joint fit)
     must lie within max(0.03, 4 standard errors) of the closed form (0.06 for a law whose
@@ -133,7 +138,7 @@ def contradictions(result) -> list[str]:
             )
     known = [form.restitution for form in forms if form is not None]
     if len(files) > 1 and len(known) >= 2:
-        e_joint = result.derived["restitution"]["value"]
+        e_joint = result.derived["restitution"].value
         lo, hi = min(known) - E_TOLERANCE, max(known) + E_TOLERANCE
         if not lo <= e_joint <= hi:
             out.append(
@@ -209,7 +214,7 @@ def release_problems(result) -> list[str]:
         if d.observe != "trace" or d.scene != "drop" or f >= len(result.datasets):
             continue
         entry = result.datasets[f]
-        rows = sorted(o["row"] for o in entry.get("outliers", []))
+        rows = sorted(o.row for o in entry.outliers)
         lead = next((k for k, row in enumerate(rows) if row != k), len(rows))
         if lead >= LEADING_OUTLIERS:
             out.append(
@@ -217,11 +222,11 @@ def release_problems(result) -> list[str]:
                 "frames it cannot follow (a ball held still before the release, or a hand); trim them "
                 "(or import the track with jaxunilat import video, which finds the release)"
             )
-        v0 = entry.get("parameters", {}).get("v0")
-        if v0 is not None and math.isfinite(v0["value"]) and v0["ci95"][0] > 0.0 and not _rises(d, entry):
+        v0 = entry.params.get("v0")
+        if v0 is not None and math.isfinite(v0.value) and v0.ci95[0] > 0.0 and not _rises(d, entry):
             out.append(
-                f"{_name(d, f)}: the fit launches the ball upward at the start (v0 = {v0['value']:.3g} m/s, "
-                f"95% CI from {v0['ci95'][0]:.3g} m/s): a drop does not; the trace may start with the "
+                f"{_name(d, f)}: the fit launches the ball upward at the start (v0 = {v0.value:.3g} m/s, "
+                f"95% CI from {v0.ci95[0]:.3g} m/s): a drop does not; the trace may start with the "
                 "ball held, or x0 and the time origin are off"
             )
     return out
@@ -231,16 +236,16 @@ def _rises(d, entry) -> bool:
     """Whether a trace's own first samples rise (by 3 noise σ within its first 5 rows):
     then an upward v0 is what the recording shows (it started after a bounce)."""
     x = np.asarray(d.x[:5], dtype=float)
-    sigma = float(entry.get("sigma") or 0.0)
+    sigma = float(entry.sigma or 0.0)
     return bool(x.size > 1 and np.max(x[1:]) - x[0] > 3.0 * sigma)
 
 
 def _file_restitution(result, f: int, n_files: int) -> float | None:
     if n_files == 1:
-        value = result.derived["restitution"]["value"]
+        value = result.derived["restitution"].value
     else:
-        alone = result.datasets[f].get("restitution_alone") if f < len(result.datasets) else None
-        value = None if alone is None else alone.get("value")
+        alone = result.datasets[f].restitution_alone if f < len(result.datasets) else None
+        value = None if alone is None else alone.value
     return float(value) if value is not None and math.isfinite(value) else None
 
 
@@ -253,19 +258,20 @@ def _implied_height(d, form: ClosedForm) -> float:
     return w * w / (2.0 * g)
 
 
-def apply(result) -> None:
-    """Run `contradictions` on `result` (and take a misfit verdict of its noise statement as
-    one) and, where any, mark it: not converged, nothing identifiable, the reasons in
-    `result.contradictions` and the message."""
+def gate(result: FitOutcome) -> FitOutcome:
+    """`result` judged against its data's closed forms: `contradictions` (and a misfit
+    verdict of its noise statement, taken as one) in `result.contradictions`; where any,
+    also not converged, nothing identifiable, and the reasons in the message."""
     found = contradictions(result) + release_problems(result)
     noise = result.noise or {}
     if noise.get("verdict") == "misfit":
         # Far more residual scatter than the data kind (or the stated noise, or a ball's
         # bounce-to-bounce variation) can have: the model does not describe the data.
         found.insert(0, f"the model does not fit the data: {noise.get('text', '')}")
-    result.contradictions = found
     if not found:
-        return
-    result.converged = False
-    result.message = "the fit contradicts the data's closed form: " + "; ".join(found)
-    result.identifiable = {name: False for name in result.identifiable}
+        return dataclasses.replace(result, contradictions=())
+    return result.nothing_identifiable(
+        contradictions=tuple(found),
+        converged=False,
+        message="the fit contradicts the data's closed form: " + "; ".join(found),
+    )

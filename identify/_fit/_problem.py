@@ -47,6 +47,7 @@ import numpy as np
 from jaxtyping import Array
 
 import jaxunilat as ju
+from jaxunilat._internal import check_choice
 
 #: The fitted vector's entries, in order.
 PARAMETERS = ("kappa", "k_r", "drag", "x0", "v0", "offset", "scale", "level")
@@ -70,9 +71,30 @@ UNITS = {
     "scale": "",
     "level": "m",
 }
-#: The contact laws a fit can use, by name: each law's object owns its closed forms and units.
+#: The contact laws a fit can use, by name: the one registry of laws. Each law's object owns
+#: its closed forms, units and step limits; a new law is its class plus a line here.
 LAW_MODELS = {"kelvin-voigt": ju.KelvinVoigt(), "hunt-crossley": ju.HuntCrossley(1.5)}
-LAWS = tuple(LAW_MODELS)
+#: The laws that `law="auto"` compares (by the lowest BIC).
+LAWS = ("kelvin-voigt", "hunt-crossley")
+
+
+def law_name(law) -> str:
+    """The registry name of `law`: a name of `LAW_MODELS` or "auto", or a law object equal
+    to a registered one (`jaxunilat.HuntCrossley(1.5)` → "hunt-crossley"). Anything else:
+    `ValueError` naming the registered laws."""
+    if isinstance(law, ju.AbstractContactLaw):
+        for name, model in LAW_MODELS.items():
+            if type(model) is type(law) and model == law:
+                return name
+        raise ValueError(
+            f"law: {law!r} is not a registered law; valid: "
+            + ", ".join(f"{model!r} ({name!r})" for name, model in LAW_MODELS.items())
+            + " (a new law is a line of identify's law table, LAW_MODELS)"
+        )
+    check_choice("law", law, (*LAW_MODELS, "auto"))
+    return law
+
+
 #: Predicted onsets beyond the observed ones (room for missed bounces in the matching).
 EXTRA_ONSETS = 4
 
@@ -201,7 +223,7 @@ def evaluate_rows(problem: Problem, zs, skip) -> tuple[Array, Array]:
     package's jitted entry point: the fit calls it with a fixed number of rows (each
     file's point and its finite-difference neighbours), so only the first call compiles.
     Every leaf of `problem` is an array (`stack_problems`), so a plain `jax.jit` suffices,
-    and the command line can keep its executable on disk (`jaxunilat.internal.kept_call`).
+    and the command line can keep its executable on disk (`jaxunilat._internal.kept_call`).
 
     `skip` (a traced bool, so both settings share the program): every file's first row
     runs first, and when one of them fails the other rows are not run (residuals 1e6,

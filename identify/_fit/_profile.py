@@ -4,10 +4,12 @@ whatever the Gauss–Newton interval says (that interval is a local, linear stat
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 
+from ._outcome import FitOutcome, Profile
 from ._stages import Point, lm, row_weights
 from ._uncertainty import Z95
 
@@ -21,17 +23,17 @@ def _row_variance(result, setup) -> float:
     return (result.sigma / float(setup.sigmas[0])) ** 2
 
 
-def profile_kappa(setup, best, rows, result, opts, points: int = 13):
+def profile_kappa(setup, best, rows, result: FitOutcome, opts, points: int = 13) -> Profile:
     """χ²(κ) with the other free parameters re-optimized: the profile likelihood of κ.
 
     Returns the grid, Δχ² = 2(cost − cost_min)/s², the 95% interval where Δχ² ≤ 3.84
     (the χ²₁ quantile, found by linear interpolation on the grid), and the grid points
     whose re-optimization failed (`failed`: never taken as excluded; an interval edge
-    next to one is reported as unknown, None).
+    next to one is reported as unknown, NaN), as a `Profile`.
     """
     ev = setup.evaluator
     i_kappa = int(setup.layout.index[0, 0])
-    sd = result.parameters["kappa"]["stderr"] / max(result.kappa, 1e-300)
+    sd = result.params["kappa"].stderr / max(result.kappa, 1e-300)
     sd = sd if math.isfinite(sd) else 5.0
     half = min(3.0 * max(sd, 1e-4), 5.0)
     grid = best.z[i_kappa] + np.linspace(-half, half, points)
@@ -69,15 +71,17 @@ def profile_kappa(setup, best, rows, result, opts, points: int = 13):
         return float(grid[k_in] + frac * (grid[k_out] - grid[k_in]))
 
     ci = [cross(lo_k, lo_k - 1), cross(hi_k, hi_k + 1)]
-    return dict(
+    return Profile(
         kappa=np.exp(grid),
         delta_chi2=delta,
         costs=costs,
-        failed=[float(math.exp(g)) for g, bad in zip(grid, failed, strict=True) if bad],
-        ci95=[
+        failed=tuple(float(math.exp(g)) for g, bad in zip(grid, failed, strict=True) if bad),
+        ci95=(
             (0.0 if ci[0] == -math.inf else math.exp(ci[0])) if not math.isnan(ci[0]) else math.nan,
             math.exp(ci[1]) if not math.isnan(ci[1]) else math.nan,
-        ],
+        ),
+        value=result.kappa,
+        unit=result.params["kappa"].unit,
     )
 
 
@@ -86,37 +90,39 @@ def profile_kappa(setup, best, rows, result, opts, points: int = 13):
 PROFILE_SLACK = 0.1
 
 
-def check_profile_minimum(result, best: Point, setup) -> None:
-    """A profile that finds a lower χ² than the fit: the fit is not at its minimum."""
+def check_profile_minimum(result: FitOutcome, best: Point, setup) -> FitOutcome:
+    """`result` with how far its profile reached below the fit (`Profile.below_fit`); a
+    profile that finds a lower χ² than the fit means the fit is not at its minimum: then
+    not converged, nothing identifiable, and the message says so."""
     prof = result.profile
     s2 = _row_variance(result, setup)
-    costs = prof.get("costs")
+    costs = prof.costs
     if costs is None:
-        return
+        return result
     finite = costs[np.isfinite(costs)]
     if finite.size == 0:
-        return
+        return result
     lower = 2.0 * (best.cost - float(np.min(finite))) / s2
-    prof["below_fit"] = float(max(lower, 0.0))
-    if lower > PROFILE_SLACK:
-        k = float(prof["kappa"][int(np.argmin(np.where(np.isfinite(costs), costs, np.inf)))])
-        result.converged = False
-        result.identifiable = {name: False for name in result.identifiable}
-        result.message = (
-            f"the profile of kappa found a chi-square {lower:.3g} below the fit's at kappa = {k:.6g}: "
-            "the fit stopped short of its minimum"
-        )
+    result = dataclasses.replace(result, profile=dataclasses.replace(prof, below_fit=float(max(lower, 0.0))))
+    if lower <= PROFILE_SLACK:
+        return result
+    k = float(prof.kappa[int(np.argmin(np.where(np.isfinite(costs), costs, np.inf)))])
+    return result.nothing_identifiable(
+        converged=False,
+        message=f"the profile of kappa found a chi-square {lower:.3g} below the fit's at kappa = {k:.6g}: "
+        "the fit stopped short of its minimum",
+    )
 
 
-def profile_closes(profile: dict) -> str | None:
+def profile_closes(profile: Profile) -> str | None:
     """None when the profile's 95% interval of κ is bounded on both sides; otherwise
     why not, in words (a side left open, or a re-fit that failed next to the edge)."""
-    lo, hi = (float(v) for v in profile["ci95"])
+    lo, hi = (float(v) for v in profile.ci95)
     if math.isnan(lo) or math.isnan(hi):
         return "the profile likelihood of kappa could not be re-fitted next to an end of its interval"
     open_sides = [side for side, end in (("below", lo), ("above", hi)) if end <= 0.0 or math.isinf(end)]
     if open_sides:
-        grid = np.asarray(profile["kappa"])
+        grid = np.asarray(profile.kappa)
         reach = {"below": f"down to {grid[0]:.3g}", "above": f"up to {grid[-1]:.3g}"}
         return (
             "the profile likelihood of kappa stays within 95% "

@@ -40,7 +40,7 @@ import numpy as np
 
 import jaxunilat
 from jaxunilat import Status
-from jaxunilat.internal import InputError, check_choice, check_finite, check_range
+from jaxunilat._internal import InputError, check_choice, check_finite, check_range
 
 from ._problem import LAW_MODELS
 
@@ -367,6 +367,20 @@ def law_contact_time(law: str, kappa, k_r, mass, speeds, *, gravity: float = 9.8
 _FD_STEP = 1e-6
 #: Both residuals (log e, log t_c) below this end the refinement.
 _CONVERGED = 1e-11
+
+
+def inverse_by_simulation(law: str, e: float, t_c: float, mass: float, speed: float, **options):
+    """(κ, k_r) of a registered law without a closed-form inverse, from restitution e and
+    contact time t_c (s) at impact speed `speed` (m/s), by simulated impacts: Hunt–Crossley
+    with n = 3/2 (`hunt_crossley_from_restitution`, which takes `options`). Any other law
+    raises `NoClosedFormError` naming it: a fit of it needs `initial` κ and k_r."""
+    model = LAW_MODELS[law]
+    if isinstance(model, jaxunilat.HuntCrossley) and model.exponent == 1.5:
+        return hunt_crossley_from_restitution(e, t_c, mass, speed, **options)
+    raise jaxunilat.NoClosedFormError(
+        f"{model!r} has no closed-form map (e, t_c) -> (kappa, k_r) and identify has no simulated one for it; "
+        "pass starting values: initial={'kappa': ..., 'k_r': ...}"
+    )
 
 
 def hunt_crossley_from_restitution(

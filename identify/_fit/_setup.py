@@ -16,7 +16,8 @@ import math
 
 import numpy as np
 
-from jaxunilat.internal import InputError
+from jaxunilat import NoClosedFormError
+from jaxunilat._internal import InputError, check_range
 
 from .._data._trace_flights import trace_release
 from ._initial import (
@@ -27,9 +28,9 @@ from ._initial import (
     trace_calibration,
 )
 from ._joint import JointEvaluator, Layout, make_groups
-from ._kelvin_voigt import parameters_from_restitution
 from ._problem import (
     EXTRA_ONSETS,
+    LAW_MODELS,
     LOG_PARAMETERS,
     NEUTRAL,
     PARAMETERS,
@@ -376,10 +377,17 @@ def point_at(setup: Setup, kappa: float, k_r: float) -> np.ndarray:
 
 
 def contact_parameters(law: str, e: float, t_c: float, mass: float, speed: float) -> tuple[float, float]:
-    """(κ, k_r) of `law` with restitution e and contact time t_c (s) at impact speed `speed`."""
-    if law == "hunt-crossley":
-        from ._restitution import hunt_crossley_from_restitution
+    """(κ, k_r) of `law` with restitution e and contact time t_c (s) at impact speed `speed`
+    (m/s): the law's closed-form inverse on the host, or where it has none its inverse by
+    simulated impacts (`_restitution.inverse_by_simulation`)."""
+    model = LAW_MODELS[law]
+    check_range("e", e, lo=0.0, hi=1.0, lo_open=True)
+    check_range("t_c", t_c, lo=0.0, lo_open=True, unit="s")
+    check_range("mass", mass, lo=0.0, lo_open=True, unit="kg")
+    try:
+        kappa, k_r = model.parameters_from_restitution(float(e), float(t_c), float(mass), speed, xp=np)
+    except NoClosedFormError:
+        from ._restitution import inverse_by_simulation
 
-        kappa, k_r = hunt_crossley_from_restitution(e, t_c, mass, speed)
-        return float(kappa), float(k_r)
-    return parameters_from_restitution(e, t_c, mass)
+        kappa, k_r = inverse_by_simulation(law, e, t_c, mass, speed)
+    return float(kappa), float(k_r)

@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from jaxunilat.internal import InputError
+from jaxunilat._internal import InputError
 
 from .._data._import import ratio_chain
 from ._derived import derived_quantities

@@ -6,13 +6,20 @@ of the markers goes below the axes, the key of the files to their right: a legen
 file names up to `MANY_FILES` files, beyond that a colour bar of the release height),
 held-out rows are open circles and outliers red crosses, and residuals beyond the axis
 of the kept rows are drawn at its edge instead of squashing it.
+
+Only drawing happens here: the restitution panel draws a `RestitutionCurves` that the fit
+layer computed (`identify._fit._curves`; `identify.plot` passes it).
 """
 
 from __future__ import annotations
 
 import os
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from .._fit._curves import RestitutionCurves
 
 #: Up to this many files the figure names every file in a legend; beyond, a colour bar.
 MANY_FILES = 10
@@ -32,8 +39,8 @@ def _files(result):
     out, start = [], 0
     for f, d in enumerate(datasets):
         n = d.num_rows
-        entry = result.datasets[f] if result.datasets else {"outliers": []}
-        outliers = np.asarray([o["row"] for o in entry["outliers"]], dtype=int)
+        entry = result.datasets[f] if result.datasets else None
+        outliers = np.asarray([o.row for o in entry.outliers] if entry is not None else [], dtype=int)
         out.append((d, residuals[start : start + n], used[start : start + n], outliers))
         start += n
     return out
@@ -121,49 +128,10 @@ def _style_legend(
     fig.legend(handles=handles, loc="outside lower center", ncol=len(handles), fontsize=8, frameon=False)
 
 
-def law_curves(result, speeds) -> dict:
-    """e(v) of the fitted law (and, after `law="auto"`, of the other law) at `speeds` (m/s)."""
-    from .._fit._restitution import law_restitution
-
-    d = result.data
-    laws = (
-        result.laws
-        if result.laws
-        else {result.law: {"parameters": {"kappa": result.kappa, "k_r": result.k_r}}}
-    )
-    curves = {}
-    for name, entry in laws.items():
-        p = entry["parameters"]
-        e = law_restitution(name, p["kappa"], p["k_r"], d.mass, speeds, gravity=d.gravity)
-        curves[f"{name} (fit)" if name == result.law else name] = (np.asarray(speeds), np.asarray(e))
-    return curves
-
-
-def _points_by_file(result):
-    """`bounce_points` with each segment's file index: [(file, label, BounceRestitution)]."""
-    from ._summary import bounce_points
-
-    datasets = result.datasets_data or [result.data]
-    labels = [_label(d, f) for f, d in enumerate(datasets)]
-    out, f = [], 0
-    for label, points in bounce_points(result):
-        # bounce_points walks the files in order; a segment's label is its file's, maybe + " (k)".
-        while f < len(labels) and not (label == labels[f] or label.startswith(labels[f] + " (")):
-            f += 1
-        out.append((min(f, len(labels) - 1), label, points))
-    return out
-
-
-def _speed_grid(points) -> np.ndarray:
-    speeds = np.concatenate([np.asarray(p.impact_speed) for *_, p in points]) if points else np.array([1.0])
-    speeds = speeds[np.isfinite(speeds)]
-    lo, hi = (float(np.min(speeds)), float(np.max(speeds))) if speeds.size else (0.3, 3.0)
-    return np.linspace(max(0.8 * lo, 0.05), 1.1 * hi, 24)
-
-
-def plot_restitution_of_fit(result, *, ax=None):
+def plot_restitution_of_fit(result, view: RestitutionCurves, *, ax=None):
     """Per-bounce restitution against impact speed: the data (drag-corrected flights of
-    the kept onsets, each file in its colour) and each fitted law's curve (black).
+    the kept onsets, each file in its colour) and each fitted law's curve (black), as the
+    fit layer computed them (`view`).
 
     On a new figure (`ax` None) the files' key and the legend sit outside the axes as in
     `plot_fit`; on a given `ax`, one legend (the laws, and the files up to `MANY_FILES`)
@@ -173,8 +141,7 @@ def plot_restitution_of_fit(result, *, ax=None):
     from matplotlib.lines import Line2D
 
     key = _Key(result)
-    points = _points_by_file(result)
-    curves = law_curves(result, _speed_grid(points))
+    points, curves = view.points, view.curves
     if ax is None:
         fig = Figure(
             figsize=(7.5, max(4.6, 1.8 + 0.26 * key.n * (key.n <= MANY_FILES))), layout="constrained"
@@ -246,25 +213,10 @@ def _restitution_panel(ax, result, key: _Key, points, curves) -> list:
     return laws
 
 
-def plot_fit(result, *, title: str | None = None):
-    """A figure of the data against the fitted model and the residuals.
-
-    - impact onsets: restitution against impact speed (left: each bounce from the data's
-      drag-corrected flight times, each fitted law as a black curve) and the onset
-      residuals of every file (right, ms, against the onset time in s);
-    - trace: x(t) data and the fitted run of the first file (top, m), the residuals of
-      every file (bottom, mm);
-    - apex: observed rebound heights against the fitted ones (top, m), residuals (bottom, mm).
-
-    Fitted rows are dots, held-out rows open circles, outliers red crosses (a red
-    triangle at the axis' edge when beyond the kept rows' range, which sets the axis).
-    Each file has its own colour; the key sits right of the axes (a legend of file
-    names up to `MANY_FILES` files, a colour bar of the release height x0 in mm beyond)
-    and the markers' legend below them, never over the data. The figure grows a little
-    with the number of files named in the legend.
-
-    **Returns:** a `matplotlib.figure.Figure` (save it with `jaxunilat.save_figure`).
-    """
+def plot_fit(result, view: RestitutionCurves | None = None, *, title: str | None = None):
+    """The figure of `jaxunilat.identify.plot.plot_fit` (its docstring says what it shows).
+    `view`: the restitution panel's points and curves (impact onsets only;
+    `identify._fit._curves.restitution_curves`)."""
     from matplotlib.figure import Figure
 
     data = result.data
@@ -277,8 +229,7 @@ def plot_fit(result, *, title: str | None = None):
     if data.observe == "impacts":
         fig = Figure(figsize=(13.0, height), layout="constrained")
         left, right = fig.subplots(1, 2, width_ratios=(1, 1.2))
-        points = _points_by_file(result)
-        laws = _restitution_panel(left, result, key, points, law_curves(result, _speed_grid(points)))
+        laws = _restitution_panel(left, result, key, view.points, view.curves)
         _residual_panel(
             right, result, key, scale=1e3, unit="ms", xlabel="onset time t [s] (each file's clock)"
         )
@@ -386,18 +337,16 @@ def _residual_panel(ax, result, key: _Key, *, scale: float, unit: str, xlabel: s
 def _title(result) -> str:
     """The figure's title: the data, the law, e, and κ and k_r only where the data carry
     them (`result.identifiable`); a κ the data do not bound is named as such, not printed."""
-    from .._fit._problem import units
-
-    kappa, k_r = result.parameters["kappa"], result.parameters["k_r"]
+    kappa, k_r = result.params["kappa"], result.params["k_r"]
     e = result.derived["restitution"]
-    u = units(result.law)
+    u = result.units
     files = result.datasets_data or [result.data]
     name = _label(files[0], 0) if len(files) == 1 else f"{len(files)} files"
     known = result.identifiable or {}
-    shown = [f"e = {e['value']:.4f}"]
+    shown = [f"e = {e.value:.4f}"]
     for key, entry in (("kappa", kappa), ("k_r", k_r)):
         if known.get(key):
-            shown.append(f"{key} = {entry['value']:.4g} {u[key]}")
+            shown.append(f"{key} = {entry.value:.4g} {u[key]}")
     missing = [key for key in ("kappa", "k_r") if not known.get(key)]
     if missing:
         shown.append(f"{' and '.join(missing)} not identifiable from these data")

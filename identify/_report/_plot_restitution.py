@@ -6,7 +6,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from jaxunilat.internal import InputError
+from jaxunilat._internal import InputError
 
 
 def _data_sets(data) -> list[tuple[str | None, object]]:

@@ -1,19 +1,20 @@
-"""`FitResult`: estimates, uncertainty, verdicts, and the report and JSON views of a fit."""
+"""`FitResult`: a finished fit (`identify._fit._outcome.FitOutcome`) with its report and
+JSON views. Nothing here fits or computes an estimate: every number comes from the fit
+layer; this module only formats text and JSON."""
 
 from __future__ import annotations
 
 import dataclasses
 import math
 import os
+from collections.abc import Mapping
 from decimal import ROUND_HALF_UP, Decimal
-from typing import Any
 
-import jax.numpy as jnp
 import numpy as np
 
-import jaxunilat as ju
-
-from .._fit._problem import LOG_PARAMETERS, NEUTRAL, PARAMETERS, TRACE_ONLY, applies, from_z, units
+from .._fit._estimate import ABSURD, Bound, Estimate
+from .._fit._outcome import VERDICTS, FileFit, FitOutcome
+from .._fit._problem import PARAMETERS, TRACE_ONLY
 from .._fit._uncertainty import P_INCONSISTENT
 
 #: Each file's own entries (the joint layout's local ones), their SI unit, and how the
@@ -27,178 +28,22 @@ _LOCAL = (
 )
 _LOCAL_NAMES = tuple(name for name, *_ in _LOCAL)
 
-#: A 95% interval whose ends lie more than this many decades apart bounds nothing useful.
-SPAN_DECADES = 3.0
-#: An interval end beyond 1e±30 (SI units) is a number, not a bound.
-ABSURD = 1e30
 #: The report lists the correlations of at least this size (the JSON has them all).
 SHOWN_CORRELATION = 0.1
-#: Contact times outside this window (s) are no physical bound on a ball's contact.
-CONTACT_TIME_WINDOW = (1e-6, 1.0)
-#: How `bound` shows each quantity: (symbol, scale from SI, unit); None: the law's unit.
-_SHOWN = {
-    "kappa": ("kappa", 1.0, None),
-    "k_r": ("k_r", 1.0, None),
-    "drag": ("drag", 1.0, "s/m"),
-    "restitution": ("e", 1.0, ""),
-    "contact_time": ("t_c", 1e3, "ms"),
-}
 
 
-@dataclasses.dataclass
-class FitResult:
-    """The outcome of `identify.fit`.
+@dataclasses.dataclass(frozen=True, eq=False)
+class FitResult(FitOutcome):
+    """The outcome of `identify.fit`: frozen, built once (fields: `FitOutcome`).
 
-    **Fields:**
-
-    - `parameters`: `{name: {"value", "stderr", "ci95"}}` for kappa (N/m), k_r (N·s/m),
-      drag (s/m), x0 (m), v0 (m/s), offset (s), and a trace's scale (data per model
-      length) and level (m), in SI units; a parameter that was not fitted has stderr 0
-      (and the file's or the initial value).
-    - `derived`: the same for `restitution` (e, Kelvin–Voigt, [K90 Eq. 3.1]) and
-      `contact_time` (t_c = π/ω_d, s).
-    - `identifiable`: `{kappa, k_r, restitution, contact_time}` → bool: a finite 95%
-      CI whose half-width is at most `rel_halfwidth` of the value, in a converged fit
-      that its data do not contradict. κ, k_r and t_c also need a fit consistent with
-      its noise (the χ² test of `goodness`) and a profile likelihood of κ that closes on
-      both sides (`profile`); `withheld` says why one of them is not, where its
-      interval alone would have passed.
-    - `goodness`: `{"reduced_chi2", "dof", "p_value", "consistent"}`, the χ² test of
-      the fit against the file's noise σ (p_value and consistent are None when σ was
-      estimated from the residuals).
-    - `correlation`: the correlation matrix of the fitted entries of z (logs for
-      κ, k_r, drag), in the order `free`.
-    - `converged`, `message`, `iterations` (LM), `gradient_steps` (optax stage).
-    - `chi2`: Σ((prediction − data)/σ)²; `sigma`: the noise σ used for the
-      uncertainty (from the file, or estimated from the residuals: `sigma_source`).
-      Under the restitution-scatter model of impact onsets (`sigma_source` =
-      "restitution scatter") the fitted rows are log ratios of successive flights,
-      `chi2` is theirs and `sigma` is the relative bounce-to-bounce variation of e.
-    - `residuals`: prediction − data, in the data's units.
-    - `starts`: the cost and convergence of every start; `initial`: the closed-form
-      start; `profile`: the profile likelihood of κ (asked for, or computed to confirm
-      an identifiable κ).
-    - `withheld`: `{name: reason}` for each quantity whose own interval would pass but
-      that is not identifiable for a reason of the whole fit (e.g. an inconsistent fit,
-      a profile of κ open on one side).
-    - `law`, `laws`, `law_choice`: the contact law, and with `law="auto"` each law's
-      χ², AIC, BIC and estimates on the rows both used (`criteria`).
-    - `datasets`: one dict per file (rows, used, held out, `outliers`, `missed` bounces,
-      residual `rms`, its own x0/v0/offset, its `restitution_alone`); `datasets_data`
-      the files themselves; `used`: the fitted rows (outliers and held-out rows not).
-    - `noise`: the stated σ against the residual scatter, in words (`noise["text"]`).
-    - `holdout`: `{"fraction", "rows", "rms", "max", "within_noise", …}` in data units.
-    - `robust`: the robust pass's loss, threshold and scale (None with keep_outliers).
-    - `trends`: one dict per file whose own flights show e changing with the impact speed
-      (`identify._fit._trend.restitution_trend`: `direction`, the splitting `speed`,
-      `e_above`, `e_below`, `z`, `bounces`, `rows_used` (first and last fitted row,
-      0-based), `rows`); JSON key `restitution_trend`.
-    - `restart`: where the first fit contradicted the data's closed form and the fit was
-      restarted from it (`{"first_restitution", "reasons", "accepted"}`), else None.
-    - `simulations`: compiled evaluations (each 2q + 1 event-mode runs, q the free
-      parameters other than the offset, whose Jacobian column needs no run); `wall_s`.
+    Each quantity is an `Estimate` (value, stderr, ci95, unit, fixed, identifiable,
+    bound): `result.params["kappa"].value` (N/m), `result.derived["restitution"].ci95`;
+    `result.identifiable` maps κ, k_r, e and t_c to their verdicts. `report()` is the
+    text for people, `to_json_dict()` the JSON of `jaxunilat identify --json`,
+    `file_table()` each file's own values. A variant is a new result
+    (`dataclasses.replace`); assigning to a field raises
+    `dataclasses.FrozenInstanceError`.
     """
-
-    data: Any
-    problem: Any
-    z: np.ndarray
-    free: list[str]
-    parameters: dict
-    derived: dict
-    identifiable: dict
-    correlation: np.ndarray
-    cost: float
-    residuals: np.ndarray
-    chi2: float
-    sigma: float
-    sigma_source: str
-    goodness: dict
-    converged: bool
-    message: str
-    iterations: int
-    gradient_steps: int
-    method: str
-    starts: list
-    initial: dict
-    profile: dict | None
-    rel_halfwidth: float
-    simulations: int
-    wall_s: float
-    law: str = "kelvin-voigt"
-    datasets: list = dataclasses.field(default_factory=list)
-    used: np.ndarray | None = None
-    noise: dict | None = None
-    holdout: dict | None = None
-    robust: dict | None = None
-    n_parameters: int = 2
-    joint_z: np.ndarray | None = None
-    laws: dict | None = None
-    law_choice: str = "given"
-    row_sigma: np.ndarray | None = None
-    sigma_known: bool = False
-    datasets_data: list = dataclasses.field(default_factory=list)
-    notes: list = dataclasses.field(default_factory=list)
-    contradictions: list = dataclasses.field(default_factory=list)
-    withheld: dict = dataclasses.field(default_factory=dict)
-    trends: list = dataclasses.field(default_factory=list)
-    restart: dict | None = None
-
-    def withhold(self, names, reason: str) -> None:
-        """Mark `names` not identifiable, giving `reason` where their interval alone passed."""
-        for name in names:
-            if self.identifiable.get(name):
-                self.identifiable[name] = False
-                self.withheld.setdefault(name, reason)
-
-    def criteria(self, used: np.ndarray | None = None) -> dict:
-        """χ², AIC and BIC of the fit over the `used` rows (default: its fitted rows).
-
-        With the files' noise σ: χ² = Σ(r/σ)², AIC = χ² + 2p, BIC = χ² + p ln n; without
-        it, χ² is replaced by n ln(RSS/n) (the Gaussian likelihood at the estimated σ).
-        Two laws are compared on the same rows (`fit(law="auto")` passes the rows both
-        used).
-        """
-        used = self.used if used is None else used
-        sigma = self.row_sigma if self.row_sigma is not None else np.ones_like(self.residuals)
-        r = (self.residuals / sigma)[used]
-        n, p = int(r.size), int(self.n_parameters)
-        chi2 = float(np.sum(r**2))
-        fit_term = chi2 if self.sigma_known else n * math.log(max(chi2 / max(n, 1), 1e-300))
-        return {
-            "chi2": chi2,
-            "n": n,
-            "p": p,
-            "aic": fit_term + 2 * p,
-            "bic": fit_term + p * math.log(max(n, 1)),
-            "parameters": {k: self.parameters[k]["value"] for k in ("kappa", "k_r")},
-            "restitution": self.derived["restitution"]["value"],
-            "contact_time": self.derived["contact_time"]["value"],
-            "converged": bool(self.converged),
-        }
-
-    @property
-    def kappa(self) -> float:
-        """κ, N/m."""
-        return self.parameters["kappa"]["value"]
-
-    @property
-    def k_r(self) -> float:
-        """k_r, N·s/m."""
-        return self.parameters["k_r"]["value"]
-
-    def values(self) -> dict[str, float]:
-        """Every parameter's value (`PARAMETERS`), SI units."""
-        return from_z(self.z)
-
-    def kappa_k_r_correlation(self) -> float:
-        """corr(log κ, log k_r) of the estimates (NaN unless both were fitted)."""
-        if "kappa" in self.free and "k_r" in self.free:
-            return float(self.correlation[self.free.index("kappa"), self.free.index("k_r")])
-        return math.nan
-
-    def ball(self) -> ju.Ball:
-        """The fitted `jaxunilat.Ball` (exact Heaviside) for this data set's scene."""
-        return self.problem.ball(jnp.asarray(self.z))
 
     def inconsistency_warning(self) -> str:
         """What a failed χ² test against the stated noise means here, and what to try."""
@@ -222,27 +67,17 @@ class FitResult:
     def to_json_dict(self) -> dict:
         """The JSON document of `jaxunilat identify --json` (schema in the README)."""
         k = self.kappa_k_r_correlation()
-
-        def clean(entry):
-            out = {}
-            for key, value in entry.items():
-                if key == "ci95":
-                    out[key] = [_finite_or_none(v) for v in value]
-                else:
-                    out[key] = _finite_or_none(value)
-            return out
-
         return {
-            "parameters": {n: clean(self.parameters[n]) for n in ("kappa", "k_r")},
-            "derived": {n: clean(self.derived[n]) for n in ("restitution", "contact_time")},
+            "parameters": {n: self.params[n].to_json() for n in ("kappa", "k_r")},
+            "derived": {n: self.derived[n].to_json() for n in ("restitution", "contact_time")},
             "identifiable": {n: bool(v) for n, v in self.identifiable.items()},
             "withheld": dict(self.withheld),
             "correlation": [[1.0, _finite_or_none(k)], [_finite_or_none(k), 1.0]],
             "converged": bool(self.converged),
             "nuisance": {
-                n: clean(self.parameters[n])
+                n: self.params[n].to_json()
                 for n in PARAMETERS[2:]
-                if n in self.free or (n != "offset" and applies(n, self.data.observe))
+                if n in self.free or (n != "offset" and (n not in TRACE_ONLY or self.data.observe == "trace"))
             },
             "fitted": list(self.free),
             "correlation_all": {
@@ -267,48 +102,41 @@ class FitResult:
             "wall_s": self.wall_s,
             "law": self.law,
             "law_choice": self.law_choice,
-            "units": {n: units(self.law)[n] for n in ("kappa", "k_r")},
+            "units": {n: self.units[n] for n in ("kappa", "k_r")},
             "laws": None if self.laws is None else _clean_json(self.laws),
             "noise": None if self.noise is None else _clean_json(self.noise),
             "robust": None if self.robust is None else _clean_json(self.robust),
             "outliers": [
                 {
-                    "data": d["data"],
-                    "rows": [o["row"] for o in d["outliers"]],
-                    "details": _clean_json(d["outliers"]),
+                    "data": d.data,
+                    "rows": [o.row for o in d.outliers],
+                    "details": _clean_json([dataclasses.asdict(o) for o in d.outliers]),
                 }
                 for d in self.datasets
             ],
-            "datasets": [_clean_json(d) for d in self.datasets],
+            "datasets": [_clean_json(d.to_json()) for d in self.datasets],
             "holdout": None if self.holdout is None else _clean_json(self.holdout),
             "notes": list(self.notes),
             "restitution_trend": _clean_json(self.trends),
-            "restart": None if self.restart is None else _clean_json(self.restart),
+            "restart": None if self.restart is None else _clean_json(dataclasses.asdict(self.restart)),
             "files": _clean_json(self.file_table()),
-            "bounds": _clean_json(self.bounds()),
+            "bounds": {n: _clean_json(b.to_json()) for n, b in self.bounds().items()},
             "profile_kappa": None
             if self.profile is None
             else {
-                "kappa": [float(v) for v in self.profile["kappa"]],
-                "delta_chi2": [_finite_or_none(v) for v in self.profile["delta_chi2"]],
-                "ci95": [_finite_or_none(v) for v in self.profile["ci95"]],
-                "failed": [float(v) for v in self.profile.get("failed", [])],
-                "bound": _clean_json(
-                    bound(
-                        "kappa", {"value": self.kappa, "ci95": self.profile["ci95"]}, units(self.law)["kappa"]
-                    )
-                ),
+                "kappa": [float(v) for v in self.profile.kappa],
+                "delta_chi2": [_finite_or_none(v) for v in self.profile.delta_chi2],
+                "ci95": [_finite_or_none(v) for v in self.profile.ci95],
+                "failed": [float(v) for v in self.profile.failed],
+                "bound": _clean_json(self.profile.bound.to_json()),
             },
         }
 
-    def bounds(self) -> dict:
-        """What the data bound of κ, k_r, e and t_c (`bound`): `{name: {"kind", "lower",
-        "upper", "unit", "text"}}`, SI units; "none" where the 95% interval is unbounded or
-        absurd (not finite, beyond 1e±30, or spanning more than `SPAN_DECADES` decades)."""
-        u = units(self.law)
-        out = {n: bound(n, self.parameters[n], u[n]) for n in ("kappa", "k_r")}
-        out.update({n: bound(n, self.derived[n]) for n in ("restitution", "contact_time")})
-        return out
+    def bounds(self) -> dict[str, Bound]:
+        """What the data bound of κ, k_r, e and t_c (`Estimate.bound`): kind "none" where
+        the 95% interval is unbounded or absurd (not finite, beyond 1e±30, or spanning more
+        than `SPAN_DECADES` decades)."""
+        return {name: self.estimate(name).bound for name in VERDICTS}
 
     def file_table(self) -> list[dict]:
         """One dict per file, in file order: the per-file (nuisance) values of the fit.
@@ -323,79 +151,64 @@ class FitResult:
         the used rows `{"value", "unit"}` in SI units (s for onsets, m otherwise) and
         `rms_shown` the same in the report's unit (ms or mm).
         """
-        datasets = self.datasets_data or [self.data]
-        entries = self.datasets or [None] * len(datasets)
-        per_file = self._per_file_values(len(datasets))
+        datasets = self.datasets_data or (self.data,)
+        entries = self.datasets or (None,) * len(datasets)
+        per_file = self.file_values()
         used = self.used if self.used is not None else np.ones(len(self.residuals), bool)
         out, start = [], 0
         for f, (d, e) in enumerate(zip(datasets, entries, strict=True)):
             n = int(d.num_rows)
             if e is None:  # a result built by hand: derive the counts from the mask
-                res = np.asarray(self.residuals[start : start + n])
-                mask = used[start : start + n]
-                e = {"data": d.path, "rows": n, "used": int(mask.sum()), "held_out": 0, "outliers": [],
-                     "missed": [], "parameters": {},
-                     "rms": float(np.sqrt(np.mean(res[mask] ** 2))) if mask.any() else None}  # fmt: skip
+                res, mask = np.asarray(self.residuals[start : start + n]), used[start : start + n]
+                rms = float(np.sqrt(np.mean(res[mask] ** 2))) if mask.any() else None
+                e = FileFit(data=d.path, observe=d.observe, rows=n, used=int(mask.sum()), held_out=0, rms=rms)
             start += n
-            observe = e.get("observe", d.observe)
-            scale, shown = residual_unit(observe)
-            si = "s" if observe == "impacts" else "m"
-            values = {}
-            for name, unit, *_ in _LOCAL:
-                own = e["parameters"].get(name)
-                if own is None and name in TRACE_ONLY and name in self.free and observe == "trace":
-                    if name not in (getattr(d, "measured", ()) or ()):
-                        # File 0's entry is the headline view; a per-file summary that
-                        # lists only x0, v0 and offset leaves the other files' s.e. out.
-                        own = (
-                            self.parameters[name] if f == 0 else {"value": per_file[f][name], "stderr": None}
-                        )
-                if own is not None:
-                    values[name] = {"value": own["value"], "stderr": own["stderr"], "unit": unit,
-                                    "status": "fitted"}  # fmt: skip
-                else:
-                    values[name] = {
-                        "value": per_file[f][name],
-                        "stderr": None,
-                        "unit": unit,
-                        "status": "fixed",
-                    }
-            alone = e.get("restitution_alone")
+            scale, shown = residual_unit(e.observe)
+            alone = e.restitution_alone
             if alone is None and len(datasets) == 1:
                 alone = self.derived["restitution"]
-            rms = e.get("rms")
             out.append(
                 {
-                    "name": _file_name(e["data"], f),
-                    "data": e["data"],
-                    "observe": observe,
-                    "rows": int(e["rows"]),
-                    "used": int(e["used"]),
-                    "held_out": int(e.get("held_out", 0)),
-                    "outliers": len(e["outliers"]),
-                    "missed": len(e.get("missed", [])),
-                    **values,
-                    "e_alone": None if alone is None else dict(alone),
-                    "rms": {"value": rms, "unit": si},
-                    "rms_shown": {"value": None if rms is None else rms * scale, "unit": shown},
+                    "name": _file_name(e.data, f),
+                    "data": e.data,
+                    "observe": e.observe,
+                    "rows": int(e.rows),
+                    "used": int(e.used),
+                    "held_out": int(e.held_out),
+                    "outliers": len(e.outliers),
+                    "missed": len(e.missed),
+                    **self._file_values(f, d, e, per_file[f]),
+                    "e_alone": None
+                    if alone is None
+                    else {"value": alone.value, "stderr": alone.stderr, "ci95": list(alone.ci95)},
+                    "rms": {"value": e.rms, "unit": "s" if e.observe == "impacts" else "m"},
+                    "rms_shown": {"value": None if e.rms is None else e.rms * scale, "unit": shown},
                 }
             )
         return out
 
-    def _per_file_values(self, n_files: int) -> list[dict]:
-        """Each file's own entries (x0, v0, offset, scale, level) as used by the fit (fitted
-        or held), SI units."""
-        if self.joint_z is not None:
-            from .._fit._joint import Layout
-
-            z = np.asarray(self.joint_z, dtype=float)
-            layout = Layout(n_files=n_files)
-            if z.size == layout.size:
-                return [from_z(z[layout.index[f]]) for f in range(n_files)]
-        if n_files == 1:
-            return [from_z(self.z)]
-        datasets = self.datasets_data or [self.data]
-        return [{"x0": float(d.x0), "v0": float(d.v0), "offset": 0.0, **NEUTRAL} for d in datasets]
+    def _file_values(self, f: int, d, e: FileFit, held: dict[str, float]) -> dict[str, dict]:
+        """File f's x0, v0, offset, scale and level for `file_table`: its own fitted entry,
+        a trace calibration fitted without a per-file interval, or the value held."""
+        values = {}
+        for name, unit, *_ in _LOCAL:
+            own: Estimate | None = e.params.get(name)
+            value, stderr = (own.value, own.stderr) if own is not None else (held[name], None)
+            fitted = own is not None
+            if own is None and name in TRACE_ONLY and name in self.free and e.observe == "trace":
+                if name not in (getattr(d, "measured", ()) or ()):
+                    # File 0's entry is the headline view; a per-file summary that lists
+                    # only x0, v0 and offset leaves the other files' s.e. out.
+                    fitted = True
+                    if f == 0:
+                        value, stderr = self.params[name].value, self.params[name].stderr
+            values[name] = {
+                "value": value,
+                "stderr": stderr,
+                "unit": unit,
+                "status": "fitted" if fitted else "fixed",
+            }
+        return values
 
     def report(self) -> str:
         """A plain-text report for people, most wanted first: the data, the results (e,
@@ -420,7 +233,7 @@ class FitResult:
         """[[Data]]: the files, what they observe, their rows, the mass and gravity."""
         d = self.data
         lines = ["[[Data]]"]
-        files = [e["data"] or "(in memory)" for e in self.datasets] or [d.path or "(in memory)"]
+        files = [e.data or "(in memory)" for e in self.datasets] or [d.path or "(in memory)"]
         lines.append(f"    file               = {files[0]}")
         lines += [f"                         {f}" for f in files[1:]]
         lines.append(f"    scene, observe     = {d.scene}, {d.observe}")
@@ -439,8 +252,12 @@ class FitResult:
 
     def _report_results(self) -> list[str]:
         """[[Results]]: e, t_c, κ and k_r, each with its identifiability verdict beside it."""
-        u = units(self.law)
-        where = "" if self.law == "kelvin-voigt" else "; e and t_c at the data's typical impact speed"
+        u = self.units
+        where = (
+            "; e and t_c at the data's typical impact speed"
+            if self.law_model.restitution_depends_on_speed
+            else ""
+        )
         lines = [
             f"[[Results]] ({self.law}{where}; identifiable: 95% CI finite and half-width <= "
             f"{self.rel_halfwidth:.0%} of the value)"
@@ -453,13 +270,13 @@ class FitResult:
             ("kappa", "kappa", 1.0, u["kappa"]),
             ("k_r", "k_r", 1.0, u["k_r"]),
         ):
-            entry = self.derived.get(name) or self.parameters[name]
+            entry = self.estimate(name)
             if name in ("kappa", "k_r") and name not in self.free:
-                columns, says = [f"{label:<7}= {entry['value']:.6g} (fixed) {unit}"], "held, not fitted"
+                columns, says = [f"{label:<7}= {entry.value:.6g} (fixed) {unit}"], "held, not fitted"
             else:
-                b = self._bound(name)
+                b = entry.bound
                 columns = _entry_columns(label, entry, unit, self.converged, b, scale)
-                says = _halfwidth(entry) if b["kind"] == "interval" else ""
+                says = _halfwidth(entry) if b.kind == "interval" else ""
             says = self.withheld.get(name, says if self.converged else "the fit did not converge")
             verdict = "yes" if self.identifiable[name] else "NO"
             rows.append([*columns, f" identifiable: {verdict}" + (f" ({says})" if says else "")])
@@ -471,7 +288,7 @@ class FitResult:
     def _report_nuisance(self) -> list[str]:
         """[[Nuisance parameters]]: drag, the release state, clock offset and a trace's
         calibration, fitted or held (a several-file fit points to [[Files]])."""
-        d, unit = self.data, units(self.law)
+        d, unit = self.data, self.units
         several = len(self.datasets_data or [d]) > 1
         lines = [
             "[[Nuisance parameters]]"
@@ -480,7 +297,7 @@ class FitResult:
         ]
         per_file, rows = [], []
         for name in PARAMETERS[2:]:
-            entry = self.parameters[name]
+            entry = self.params[name]
             if several and name in _LOCAL_NAMES:
                 if name not in TRACE_ONLY or any(f.observe == "trace" for f in self.datasets_data):
                     per_file.append(name)
@@ -489,9 +306,9 @@ class FitResult:
                 held = name in ("x0", "v0") or (name in TRACE_ONLY and d.observe == "trace")
                 if held or (name == "drag" and d.drag > 0):
                     shown = f" {unit[name]}" if unit[name] else ""
-                    rows.append([f"{name:<7}= {entry['value']:.6g} (fixed){shown}"])
+                    rows.append([f"{name:<7}= {entry.value:.6g} (fixed){shown}"])
                 continue
-            rows.append(_entry_columns(name, entry, unit[name], self.converged, self._bound(name)))
+            rows.append(_entry_columns(name, entry, unit[name], self.converged, entry.bound))
         lines += _aligned(rows)
         if several:
             lines.append(self._per_file_line(per_file))
@@ -540,14 +357,6 @@ class FitResult:
             return f"consistent (P(chi2_{dof} >= chi-square) = {p:.2g}, at or above the threshold {P_INCONSISTENT:g})"
         return f"INCONSISTENT (P(chi2_{dof} >= chi-square) = {p:.2g}, below the threshold {P_INCONSISTENT:g})"
 
-    def _bound(self, name: str) -> dict | None:
-        """`bound` of κ, k_r, drag, e and t_c (None for the release state and offset)."""
-        if name in ("kappa", "k_r", "drag"):
-            return bound(name, self.parameters[name], units(self.law)[name])
-        if name in ("restitution", "contact_time"):
-            return bound(name, self.derived[name])
-        return None
-
     def _per_file_line(self, names: list[str]) -> str:
         """Where a several-file fit's x0, v0 and offset are: the [[Files]] table, or one
         value held for every file."""
@@ -587,38 +396,37 @@ class FitResult:
         """[[Profile likelihood]] of κ, where it was computed."""
         if self.profile is None:
             return []
-        lo, hi = self.profile["ci95"]
-        u = units(self.law)["kappa"]
-        b = bound("kappa", {"value": self.kappa, "ci95": [lo, hi]}, u)
+        lo, hi = self.profile.ci95
+        u = self.units["kappa"]
         lines = ["[[Profile likelihood]]"]
-        if b["kind"] == "interval":
-            place = rounded(self.kappa, self.parameters["kappa"]["stderr"])[1]
+        if self.profile.bound.kind == "interval":
+            place = rounded(self.kappa, self.params["kappa"].stderr)[1]
             lines.append(f"    kappa 95% CI (delta chi2 <= 3.84): [{_at(lo, place)}, {_at(hi, place)}] {u}")
         else:
             lines.append(
                 f"    kappa 95% CI (delta chi2 <= 3.84): lower end {_profile_end(lo, u, 'lower')}, "
                 f"upper end {_profile_end(hi, u, 'upper')}"
             )
-        below = self.profile.get("below_fit")
+        below = self.profile.below_fit
         if below is not None and below > 0:
             lines.append(
                 f"    the profile reached a chi-square {below:.3g} below the fit's own"
                 + (": the fit is not at its minimum" if not self.converged else " (within the tolerance)")
             )
-        if self.profile.get("failed"):
-            lines.append(f"    grid points whose re-fit failed (not excluded): {len(self.profile['failed'])}")
+        if self.profile.failed:
+            lines.append(f"    grid points whose re-fit failed (not excluded): {len(self.profile.failed)}")
         return lines
 
     def _report_diagnostics(self) -> list[str]:
         """[[Diagnostics]]: how the fit ran (start, starts, iterations, evaluations, time)."""
         steps = f", {self.gradient_steps} optax steps" if self.gradient_steps else ""
-        unconverged = " (* not converged)" if any(not s["converged"] for s in self.starts) else ""
+        unconverged = " (* not converged)" if any(not s.converged for s in self.starts) else ""
         return [
             "[[Diagnostics]] (how the fit ran)",
             f"    method    = {self.method} (event mode, exact contact): {self.iterations} LM iterations{steps}, "
             f"{self.simulations} function evals (each one compiled batch of event-mode runs)",
-            f"    start     = e = {self.initial['restitution']:.4f} from {self.initial['source']}, "
-            f"t_c = {self.initial['contact_time'] * 1e3:.3g} ms (prior 0.5-2 ms)",
+            f"    start     = e = {self.initial.restitution:.4f} from {self.initial.source}, "
+            f"t_c = {self.initial.contact_time * 1e3:.3g} ms (prior 0.5-2 ms)",
             f"    starts    = {len(self.starts)}, chi-square of each on the first window: {_costs(self.starts)}"
             f"{unconverged} (rows in the first 35% of each file's span, plus the t_c prior row where used; "
             "not comparable with the final chi-square)",
@@ -663,16 +471,15 @@ class FitResult:
             lines.append(row.rstrip())
         for f, e in zip(table, self.datasets, strict=True):
             s, u = residual_unit(f["observe"])
-            for o in e["outliers"]:
-                at = f" at t = {o['t']:.6g} s" if o.get("t") is not None else ""
+            for o in e.outliers:
+                at = f" at t = {o.t:.6g} s" if o.t is not None else ""
                 lines.append(
-                    f"    outlier: {f['name']} row {o['row']}{at}, residual {o['residual'] * s:+.3g} {u} "
-                    f"({o['reason']})"
+                    f"    outlier: {f['name']} row {o.row}{at}, residual {o.residual * s:+.3g} {u} ({o.reason})"
                 )
-            for m in e["missed"]:
+            for m in e.missed:
                 lines.append(
-                    f"    missed bounce: {f['name']} between rows {m['after_row']} and {m['before_row']} "
-                    f"(interval {m['interval'] * 1e3:.4g} ms after one of {m['previous'] * 1e3:.4g} ms)"
+                    f"    missed bounce: {f['name']} between rows {m.after_row} and {m.before_row} "
+                    f"(interval {m.interval * 1e3:.4g} ms after one of {m.previous * 1e3:.4g} ms)"
                 )
         return lines
 
@@ -730,7 +537,7 @@ def _finite_or_none(value):
 
 def _clean_json(value):
     """Plain JSON types: floats finite or None, numpy scalars and arrays unpacked."""
-    if isinstance(value, dict):
+    if isinstance(value, Mapping):
         return {str(k): _clean_json(v) for k, v in value.items()}
     if isinstance(value, (list, tuple, np.ndarray)):
         return [_clean_json(v) for v in value]
@@ -745,26 +552,26 @@ def _clean_json(value):
 
 def _costs(starts) -> str:
     """Each start's chi-square on the first window (* where it did not converge)."""
-    return ", ".join(f"{2 * s['cost']:.4g}" + ("" if s["converged"] else "*") for s in starts)
+    return ", ".join(f"{2 * s.cost:.4g}" + ("" if s.converged else "*") for s in starts)
 
 
 def _entry_columns(
-    name: str, entry: dict, unit: str, converged: bool = True, b: dict | None = None, scale: float = 1.0
+    name: str, entry: Estimate, unit: str, converged: bool = True, b: Bound | None = None, scale: float = 1.0
 ) -> list[str]:
     """The columns of one parameter line: `name = value +/- stderr unit`, `(relative)` and
     `95% CI [lo, hi] unit`, every number rounded to the stderr's two significant digits
-    (`rounded`), all × `scale`; `b` (from `bound`) replaces an unbounded or absurd interval
-    by what the data bound. One column where the fit did not converge."""
-    value, stderr = entry["value"] * scale, entry["stderr"] * scale
+    (`rounded`), all × `scale`; `b` (`Estimate.bound`) replaces an unbounded or absurd
+    interval by what the data bound. One column where the fit did not converge."""
+    value, stderr = entry.value * scale, entry.stderr * scale
     shown = f" {unit}" if unit else ""
     if not converged:
         return [f"{name:<7}= {value:.6g}{shown} (no interval: the fit did not converge)"]
     text, place = rounded(value, stderr)
     rel = f"({_percent(stderr / abs(value))})" if math.isfinite(stderr) and value else "(inf)"
     head = f"{name:<7}= {text}{shown}"
-    if b is not None and b["kind"] != "interval":
-        return [head, rel + ";", b["text"]]
-    lo, hi = (end * scale for end in entry["ci95"])
+    if b is not None and b.kind != "interval":
+        return [head, rel + ";", b.text]
+    lo, hi = (end * scale for end in entry.ci95)
     return [head, rel, f"95% CI [{_at(lo, place)}, {_at(hi, place)}]{shown}"]
 
 
@@ -780,12 +587,12 @@ def _aligned(rows: list[list[str]], gap: str = "  ") -> list[str]:
     ]
 
 
-def _halfwidth(entry) -> str:
-    """The 95% half-width of an entry relative to its value, in words."""
-    lo, hi = entry["ci95"]
+def _halfwidth(entry: Estimate) -> str:
+    """The 95% half-width of an estimate relative to its value, in words."""
+    lo, hi = entry.ci95
     if not (math.isfinite(lo) and math.isfinite(hi)):
         return "95% CI unbounded"
-    return f"95% half-width {_percent((hi - lo) / 2 / abs(entry['value']))}"
+    return f"95% half-width {_percent((hi - lo) / 2 / abs(entry.value))}"
 
 
 def _percent(fraction: float) -> str:
@@ -882,88 +689,6 @@ def rounded(value: float, stderr: float | None) -> tuple[str, int | None]:
         f"({_round_at(value / unit, place - lead):f} +/- {_round_at(stderr / unit, place - lead):f})e{lead:+03d}",
         place,
     )
-
-
-def bound(name: str, entry: dict, unit: str | None = None) -> dict:
-    """What the data bound of one quantity, from its 95% interval `entry["ci95"]` (SI units).
-
-    An end says nothing when it is not finite, is at or beyond 1e±30, is ≤ 0 for a
-    positive quantity (κ, k_r, drag, t_c), lies outside 1 µs–1 s for the contact time
-    t_c, or (e) is the clip at 0 or 1. When both ends survive but lie more than
-    `SPAN_DECADES` decades apart, or one survives more than that far from the estimate,
-    neither is a useful bound either.
-
-    **Arguments:** `name` (a key of `parameters` or `derived`), the entry, and the unit
-    to show κ and k_r in (the law's; default N/m, N·s/m).
-
-    **Returns:** `{"kind", "lower", "upper", "unit", "text"}`: kind is "interval" (both
-    ends, as `lower`, `upper`), "upper" (only an upper limit), "lower" (only a lower
-    limit) or "none" (not bounded by the data); `lower`/`upper` are the surviving ends in
-    SI units (None where dropped); `unit` is the SI unit; `text` the readable statement,
-    e.g. "95% CI [0.96, 0.97]", "t_c < 3.2 ms (no lower bound from the data)" or
-    "not bounded by the data (95% CI spans 4.2 decades)".
-    """
-    symbol, scale, shown = _SHOWN.get(name, (name, 1.0, ""))
-    si = {"kappa": "N/m", "k_r": "N*s/m", "drag": "s/m", "restitution": "", "contact_time": "s"}.get(name, "")
-    shown = (unit or si) if shown is None else shown
-    lo, hi = (float(v) for v in entry["ci95"])
-    value = float(entry["value"])
-    positive = name in LOG_PARAMETERS or name == "contact_time"
-
-    def usable(end: float) -> bool:
-        if not math.isfinite(end) or abs(end) >= ABSURD:
-            return False
-        if name == "restitution":
-            return 0.0 < end < 1.0
-        if positive:
-            if end <= 1.0 / ABSURD:
-                return False
-            if name == "contact_time" and not CONTACT_TIME_WINDOW[0] <= end <= CONTACT_TIME_WINDOW[1]:
-                return False
-        return True
-
-    keep_lo, keep_hi = usable(lo), usable(hi)
-    span = None
-    if positive and keep_lo and keep_hi:
-        span = math.log10(hi / lo)
-        if span > SPAN_DECADES:
-            keep_lo = keep_hi = False
-    elif positive and value > 0 and math.isfinite(value):
-        far = [lo, hi][keep_hi] if keep_lo != keep_hi else None
-        if far is not None and abs(math.log10(far / value)) > SPAN_DECADES:
-            keep_lo = keep_hi = False
-    if name == "restitution" and (keep_lo or keep_hi):
-        keep_lo = keep_hi = math.isfinite(lo) and math.isfinite(hi)
-    if not positive and name != "restitution":
-        keep_lo = keep_hi = keep_lo and keep_hi
-
-    def fmt(v: float) -> str:
-        return f"{v * scale:.3g}" + (f" {shown}" if shown else "")
-
-    if keep_lo and keep_hi:
-        kind, text = (
-            "interval",
-            f"95% CI [{lo * scale:.6g}, {hi * scale:.6g}]" + (f" {shown}" if shown else ""),
-        )
-    elif keep_hi:
-        kind, text = "upper", f"{symbol} < {fmt(hi)} (95%; no lower bound from the data)"
-    elif keep_lo:
-        kind, text = "lower", f"{symbol} > {fmt(lo)} (95%; no upper bound from the data)"
-    else:
-        if span is not None:
-            why = f"95% CI spans {span:.1f} decades"
-        elif name == "restitution" and math.isfinite(lo) and math.isfinite(hi):
-            why = "95% CI covers 0 to 1"
-        else:
-            why = "95% CI unbounded"
-        kind, text = "none", f"not bounded by the data ({why})"
-    return {
-        "kind": kind,
-        "lower": lo if keep_lo else None,
-        "upper": hi if keep_hi else None,
-        "unit": si,
-        "text": text,
-    }
 
 
 def residual_unit(observe: str) -> tuple[float, str]:

@@ -8,7 +8,7 @@ section (`bench.json`; the other sections keep their keys):
   the accelerator, the batch sized by `sweep` from the device's free memory;
 - `latency`: one `simulate` call of that scene, warm, on the accelerator (placed there
   with `jax.default_device`) and as a user gets it by default (on the host: see
-  `jaxunilat.internal.on_host`);
+  `jaxunilat._internal.on_host`);
 - `fit`: wall time of `jaxunilat identify` on the bundled drop trace in a fresh process
   (what a user runs; compile included, no cache);
 - `compiled_loop`: the compiled loop's throughput on the same machine's cores (`prange`
@@ -101,7 +101,7 @@ def _latency(device, repeats: int, log) -> dict:
 
 def _fit_wall(log) -> dict:
     """`jaxunilat identify` of the bundled drop trace in a fresh process, no cache (s)."""
-    from ..internal._io import bundled_data
+    from .._internal._io import bundled_data
 
     found = bundled_data("drop_trace.csv")
     if not found:

@@ -15,11 +15,10 @@ reference are in `_peers.py`, the throughput scene and the sharded sweep's timin
 command line's second run, a default user's script) in `_user.py`, and the goals with
 their notes in `_goals.py`.
 
-Rows that time another package register under the entry-point group `jaxunilat.bench`
-(`ROW_GROUP`): each entry point's name is its key in `bench.json`, and its object a
-callable `row(size, log) -> dict` (`size`: this module's `Size`; `log`: called with each
-printed line). The `identify` package registers `identification` and `joint_fit`
-(`identify/_bench.py`); where a row's package is not installed, the row says "skipped".
+The rows that time identification are listed in `ROWS`: each name is its key in
+`bench.json`, and its target ("module:function") a callable `row(size, log) -> dict`
+(`size`: this module's `Size`; `log`: called with each printed line), imported only when
+the bench runs: `identification` and `joint_fit` (`jaxunilat/identify/_bench.py`).
 """
 
 from __future__ import annotations
@@ -264,7 +263,7 @@ def machine() -> dict:
     """The machine and software the figures were taken on."""
     import jax
 
-    from .._solver._loop_kernels import loop_kernel_bytes
+    from .._internal._loop_kernels import loop_kernel_bytes
 
     return {
         "date_utc": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M"),
@@ -857,41 +856,23 @@ def loop_structure(fn, *args) -> dict:
     return {"loop_body_equations": count_equations(body), "cond_branches": branches}
 
 
-# -- rows registered by other packages ------------------------------------------------------
+# -- identify's rows ------------------------------------------------------------------------
 
-#: The entry-point group of rows that other packages register (see the module's docstring).
-ROW_GROUP = "jaxunilat.bench"
-#: The rows `bench.json` always has, with what each holds when its package is missing:
-#: `identify` registers them (the bench never imports it).
-EXPECTED_ROWS = {"identification": {"rows": []}, "joint_fit": {}}
-
-
-def registered_rows() -> dict:
-    """{name: entry point} of the group `ROW_GROUP`, one per name (the first found)."""
-    from importlib.metadata import entry_points
-
-    found = {}
-    for ep in entry_points(group=ROW_GROUP):
-        found.setdefault(ep.name, ep)
-    return found
+#: The rows that time identification (see the module's docstring): name → "module:function".
+ROWS = {
+    "identification": "jaxunilat.identify._bench:identification",
+    "joint_fit": "jaxunilat.identify._bench:joint_fit",
+}
 
 
-def _registered(size: Size, log) -> dict:
-    """Every registered row's dict (`EXPECTED_ROWS` first, then the others by name); a row
-    whose entry point cannot be loaded, or that is not registered, says why it was skipped."""
-    eps = registered_rows()
+def _identify_rows(size: Size, log) -> dict:
+    """Every row of `ROWS`, by name: what its function returns."""
+    import importlib
+
     out = {}
-    for name in list(EXPECTED_ROWS) + sorted(set(eps) - set(EXPECTED_ROWS)):
-        skipped = {"status": "skipped: not registered (the identify package is not installed)"}
-        if name in eps:
-            try:
-                row = eps[name].load()
-            except (ImportError, AttributeError) as err:
-                skipped = {"status": f"skipped: {eps[name].value} cannot be loaded ({err})"}
-            else:
-                out[name] = row(size, log)
-                continue
-        out[name] = {**skipped, **EXPECTED_ROWS.get(name, {})}
+    for name, target in ROWS.items():
+        module, _, attr = target.partition(":")
+        out[name] = getattr(importlib.import_module(module), attr)(size, log)
     return out
 
 
@@ -959,7 +940,7 @@ def run_bench(size_name: str = "full", log: Callable[[str], None] = print) -> di
     result["profile"] = _profile(log)
     result["profile"]["per_step_fit"] = per_step_fit(project)
     result["profile"]["loop_floor"] = _loop_floor(size, log)
-    result.update(_registered(size, log))
+    result.update(_identify_rows(size, log))
     log("the way users write code:")
     result["user"] = {
         "code": user.USER_CODE,

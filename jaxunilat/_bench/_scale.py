@@ -85,7 +85,7 @@ def host_devices() -> int | None:
     """
     import os
 
-    from .._solver._loop_kernels import add_xla_flags
+    from .._internal._loop_kernels import add_xla_flags
 
     flags = os.environ.get("XLA_FLAGS", "")
     count = os.cpu_count() or 1
@@ -104,7 +104,7 @@ def one_by_one_fastest() -> bool:
     compile into single kernels (`use_loop_kernels`). On a GPU, vmap."""
     import jax
 
-    from .._solver._loop_kernels import loop_kernel_bytes
+    from .._internal._loop_kernels import loop_kernel_bytes
 
     return jax.default_backend() == "cpu" and loop_kernel_bytes() is not None
 

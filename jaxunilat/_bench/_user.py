@@ -407,7 +407,7 @@ def _user_process(setup: str, n: int, repeats: int) -> dict:
     """default_user_ratio's script (`DEFAULT_USER_CODE`) in a fresh process with the user's environment:
     `XLA_FLAGS` without the loop-kernel option this process has (the child's import adds
     it again, or its `setup` does), and no opt-out."""
-    from .._solver._loop_kernels import OPT_OUT, without_option
+    from .._internal._loop_kernels import OPT_OUT, without_option
 
     env = _child_env(tempfile.gettempdir())
     env.pop(OPT_OUT, None)
@@ -461,7 +461,7 @@ def default_user(size, log) -> dict:
 
 def _bundled_trace() -> str:
     """The bundled drop trace for cli_second_run's `identify` (the child runs in a temporary folder)."""
-    from ..internal._io import bundled_data
+    from .._internal._io import bundled_data
 
     found = bundled_data("drop_trace.csv")
     return found[0] if found else "data/drop_trace.csv"

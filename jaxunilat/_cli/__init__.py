@@ -8,7 +8,7 @@ handlers): `_simulate` (`simulate ball|coupling`), `_sensitivity`, `_reproduce`,
 `_bench`; `_args` holds the argument helpers they share.
 
 Other packages add commands through the `jaxunilat.commands` entry points (protocol:
-`jaxunilat.internal._cli`): `identify`, `import`, `qualify` and `export` are
+`jaxunilat._internal._cli`): `identify`, `import`, `qualify` and `export` are
 `identify._cli`'s. jaxunilat never imports identify; without it installed, those
 commands are absent.
 """

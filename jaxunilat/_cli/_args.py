@@ -10,8 +10,8 @@ import argparse
 import math
 import re
 
-from ..internal._cli import check_plot_format as check_plot_format
-from ..internal._errors import UsageError
+from .._internal._cli import check_plot_format as check_plot_format
+from .._internal._errors import UsageError
 
 
 class Parser(argparse.ArgumentParser):

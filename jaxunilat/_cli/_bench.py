@@ -30,10 +30,10 @@ def add_bench(commands) -> None:
 
 
 def _run_bench(args) -> int:
-    from ..internal._cli import input_errors, output_errors
-    from ..internal._errors import EXIT_OK, RunError, UsageError
-    from ..internal._io import check_output_dir
-    from ..internal._text import printable
+    from .._internal._cli import input_errors, output_errors
+    from .._internal._errors import EXIT_OK, RunError, UsageError
+    from .._internal._io import check_output_dir
+    from .._internal._text import printable
 
     out = args.out
     with input_errors():
@@ -61,14 +61,14 @@ def _run_bench(args) -> int:
     # processes with a new one).
     import jax
 
-    from ..internal._executables import disable_executable_cache
+    from .._internal._executables import disable_executable_cache
 
     jax.config.update("jax_enable_compilation_cache", False)
     disable_executable_cache()
 
     from .._bench._main import goal_table, run_bench
     from .._bench._plot import throughput_figure, work_precision_figure
-    from ..internal import write_atomically
+    from .._internal import write_atomically
     from ..plot import save_figure
 
     result = run_bench(size, log=lambda line: print(line, flush=True))

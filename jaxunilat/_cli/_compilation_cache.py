@@ -1,7 +1,7 @@
-"""The command line's caches: `jaxunilat.internal._compilation_cache` (shared with
-`jaxunilat.use_compilation_cache`), looked up here when a command starts."""
+"""The command line's caches: `jaxunilat._internal._compilation_cache` (shared with
+`jaxunilat.enable_compilation_cache`), looked up here when a command starts."""
 
-from ..internal._compilation_cache import (
+from .._internal._compilation_cache import (
     CACHE_DIR_ENV as CACHE_DIR_ENV,
     NO_CACHE_ENV as NO_CACHE_ENV,
     cache_dir as cache_dir,

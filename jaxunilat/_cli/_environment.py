@@ -22,7 +22,7 @@ import os
 import subprocess
 import sys
 
-from ..internal._errors import UsageError
+from .._internal._errors import UsageError
 
 #: The child: start XLA's CPU client, which parses XLA_FLAGS (and aborts on a bad one).
 _PROBE = """
@@ -38,7 +38,7 @@ PROBE_TIMEOUT_S = 60.0
 
 
 def _backend_started() -> bool:
-    from .._solver._loop_kernels import _backend_started as started
+    from .._internal._loop_kernels import _backend_started as started
 
     return started()
 
@@ -50,9 +50,9 @@ def check_xla_flags(user_flags: str | None) -> None:
     at no cost). The check runs the current environment's `XLA_FLAGS` (the user's plus
     what the command line adds) in a subprocess; it is skipped once JAX has started its
     backend (XLA then read the variable already, without aborting), and for the
-    loop-kernel option alone (`jaxunilat._solver._loop_kernels`).
+    loop-kernel option alone (`jaxunilat._internal._loop_kernels`).
     """
-    from .._solver._loop_kernels import without_option
+    from .._internal._loop_kernels import without_option
 
     # The option `import jaxunilat` adds (here, or in a parent process) is XLA's own.
     if not without_option(user_flags or "") or _backend_started():

@@ -15,14 +15,14 @@ usage dump; control characters in it (a file name's newline or terminal escape) 
 shown escaped and numbers of more than 16 digits shortened (`internal._text`). An
 internal error's line names the exception's type, and `--debug` prints its traceback.
 
-Commands: jaxunilat's own are listed in `_COMMANDS`, each `(name, module)` whose module
-has `add_<name>(subparsers)`, imported only when the parser is built. Other packages
-(identify) add theirs through the `jaxunilat.commands` entry points
-(`jaxunilat.internal._cli` documents the protocol); jaxunilat never imports them by name.
-The command line imports such a command only when it names it: `jaxunilat --help` lists
-it with the help line that its `register` passes as a string literal (read from the
-source, `written_summary`), so that `--help`, `--version` and `jaxunilat simulate ...`
-import no other package.
+Commands: every command is one line of `COMMANDS`, `(name, "module:function")`, in
+`--help` order, where `function(subparsers)` adds the command's parser
+(`jaxunilat._internal._cli` documents what a command's module provides). The identify
+commands live in the subpackage `jaxunilat.identify`; the engine never imports it. A
+command's module is imported only when the command line names it: `jaxunilat --help`
+lists each command with the help line that its function passes as a string literal
+(read from the source, `written_summary`), so that `--help` and `--version` import no
+command, and `jaxunilat simulate ...` nothing of identify.
 """
 
 from __future__ import annotations
@@ -35,8 +35,7 @@ import os
 import re
 import sys
 
-from ..internal._cli import COMMANDS_GROUP
-from ..internal._errors import (
+from .._internal._errors import (
     EXIT_BROKEN_PIPE,
     EXIT_INTERNAL,
     EXIT_OK,
@@ -47,75 +46,46 @@ from ..internal._errors import (
     RunError,
     UsageError,
 )
-from ..internal._placement import on_host
-from ..internal._text import bounded_numbers, printable
+from .._internal._text import bounded_numbers, printable
 from ._args import Parser, add_global_flags, cli_spelling, command_flags, repeat_global_flags
 
-#: jaxunilat's own commands: (name, module holding `add_<name>(subparsers)`).
-_COMMANDS = (
-    ("simulate", "jaxunilat._cli._simulate"),
-    ("sensitivity", "jaxunilat._cli._sensitivity"),
-    ("reproduce", "jaxunilat._cli._reproduce"),
-    ("bench", "jaxunilat._cli._bench"),
+#: Every command: (name, "module:function" adding its parser to the subparsers), in the
+#: order of `jaxunilat --help`'s command list.
+COMMANDS = (
+    ("simulate", "jaxunilat._cli._simulate:add_simulate"),
+    ("identify", "jaxunilat.identify._cli._identify:register"),
+    ("import", "jaxunilat.identify._cli._import:register"),
+    ("qualify", "jaxunilat.identify._cli._qualify:register"),
+    ("sensitivity", "jaxunilat._cli._sensitivity:add_sensitivity"),
+    ("reproduce", "jaxunilat._cli._reproduce:add_reproduce"),
+    ("export", "jaxunilat.identify._cli._export:register"),
+    ("bench", "jaxunilat._cli._bench:add_bench"),
 )
 
-#: The order of `jaxunilat --help`'s command list; commands not named here come last,
-#: in name order.
-_HELP_ORDER = ("simulate", "identify", "import", "qualify", "sensitivity", "reproduce", "export", "bench")
+
+def _loaded(target: str):
+    """The function `target` ("module:function"), its module imported."""
+    import importlib
+
+    module, _, attr = target.partition(":")
+    return getattr(importlib.import_module(module), attr)
 
 
-def _own_command(module: str, name: str):
-    """`add(subparsers)` that imports `module` only when the parser is built."""
-
-    def add(subparsers) -> None:
-        import importlib
-
-        getattr(importlib.import_module(module), f"add_{name}")(subparsers)
-
-    return add
-
-
-def _plugin_points() -> dict:
-    """The entry points of the `jaxunilat.commands` group, by command name (none loaded)."""
-    from importlib.metadata import entry_points
-
-    return {point.name: point for point in entry_points(group=COMMANDS_GROUP)}
-
-
-def _loaded(point):
-    """The `register` of entry point `point`; None when its package is not installed."""
-    try:
-        return point.load()
-    except ModuleNotFoundError as err:
-        top = point.value.split(":")[0].split(".")[0].strip()
-        if err.name is None or err.name.split(".")[0] != top:
-            raise  # the package is there but one of its imports is not: a bug to report
-        return None
-
-
-def plugin_commands() -> dict:
-    """The commands other packages register in the `jaxunilat.commands` entry-point group:
-    `{name: register}`. One whose package is not installed is left out."""
-    found = {name: _loaded(point) for name, point in _plugin_points().items()}
-    return {name: register for name, register in found.items() if register is not None}
-
-
-def written_summary(point) -> str | None:
-    """The help line that entry point `point`'s `register` gives its command, read from the
-    source of its module without importing it: the string literal `help` of the
-    `add_parser(NAME, help="...")` call in `register` that adds the command. None where
-    the source does not say it so plainly (no such call, aliases, a computed help) or
-    cannot be read; the command is then loaded to list it."""
+def written_summary(name: str, target: str) -> str | None:
+    """The help line that function `target` ("module:function") gives command `name`,
+    read from the source of its module without importing it: the string literal `help`
+    of the `add_parser(NAME, help="...")` call in the function. None where the source does
+    not say it so plainly (no such call, aliases, a computed help) or cannot be read; the
+    command is then loaded to list it."""
     import ast
-    from importlib.machinery import PathFinder
     from importlib.util import find_spec
 
-    module, _, attr = point.value.partition(":")
+    module, _, attr = target.partition(":")
     names = module.strip().split(".")
     try:
         spec = find_spec(names[0])  # a top-level name: found, not imported
         for end in range(2, len(names) + 1):
-            spec = PathFinder.find_spec(".".join(names[:end]), spec.submodule_search_locations)
+            spec = _found(".".join(names[:end]), spec.submodule_search_locations)
         with open(spec.origin, encoding="utf-8") as f:
             tree = ast.parse(f.read())
     except (AttributeError, ImportError, OSError, SyntaxError, TypeError, ValueError):
@@ -125,7 +95,7 @@ def written_summary(point) -> str | None:
         if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)):
             continue
         first = node.args[0] if node.func.attr == "add_parser" and node.args else None
-        if isinstance(first, ast.Constant) and first.value == point.name:
+        if isinstance(first, ast.Constant) and first.value == name:
             keywords = {k.arg: k.value for k in node.keywords}
             text = keywords.get("help")
             plain = "aliases" not in keywords and None not in keywords and isinstance(text, ast.Constant)
@@ -133,34 +103,37 @@ def written_summary(point) -> str | None:
     return None
 
 
-def _lazy(point):
-    """`register(subparsers)` that imports entry point `point` only when called."""
+def _found(name: str, path: list[str]):
+    """The spec of submodule `name` whose package's search path is `path`, as the import
+    system's finders give it, without importing the package (an editable install maps
+    `jaxunilat.identify` to the repository's identify/ folder through its own finder)."""
+    import sys
+
+    for finder in sys.meta_path:
+        spec = finder.find_spec(name, path) if hasattr(finder, "find_spec") else None
+        if spec is not None:
+            return spec
+    return None
+
+
+def _lazy(target: str):
+    """`register(subparsers)` that imports `target`'s module only when called."""
 
     def register(subparsers) -> None:
-        _loaded(point)(subparsers)
+        _loaded(target)(subparsers)
 
     return register
 
 
 def _commands(lazy: bool = False) -> list:
     """Every command as `(name, register, summary)`, in `--help` order. `summary` is None
-    for a command to register now; with `lazy`, a command of another package whose help
-    line its source gives (`written_summary`) has it, to be registered only if chosen."""
-    table = {name: (name, _own_command(module, name), None) for name, module in _COMMANDS}
-    if lazy:
-        for name, point in _plugin_points().items():
-            summary = written_summary(point)
-            register = _loaded(point) if summary is None else _lazy(point)
-            if name not in table and register is not None:  # jaxunilat's own command keeps its name
-                table[name] = (name, register, summary)
-    else:
-        for name, register in plugin_commands().items():
-            table.setdefault(name, (name, register, None))
-
-    def rank(name):
-        return (_HELP_ORDER.index(name), "") if name in _HELP_ORDER else (len(_HELP_ORDER), name)
-
-    return [table[name] for name in sorted(table, key=rank)]
+    for a command to register now; with `lazy`, a command whose help line its source
+    gives (`written_summary`) has it, to be registered only if chosen."""
+    listed = []
+    for name, target in COMMANDS:
+        summary = written_summary(name, target) if lazy else None
+        listed.append((name, _loaded(target) if summary is None else _lazy(target), summary))
+    return listed
 
 
 class _Commands(argparse._SubParsersAction):
@@ -202,9 +175,9 @@ class _Commands(argparse._SubParsersAction):
 
 
 def build_parser(lazy: bool = False) -> Parser:
-    """The full argument parser (errors raise `UsageError`). With `lazy`, the commands of
-    other packages are imported only when the command line names one: `jaxunilat --help`,
-    `--version` and `jaxunilat simulate ...` import no other package."""
+    """The full argument parser (errors raise `UsageError`). With `lazy`, a command's module
+    is imported only when the command line names it: `jaxunilat --help` and `--version`
+    import none, and `jaxunilat simulate ...` nothing of identify."""
     from .. import __version__
     from ._compilation_cache import CACHE_DIR_ENV, NO_CACHE_ENV, cache_dir
 
@@ -426,7 +399,7 @@ def main(argv: list[str] | None = None) -> int:
     interrupt while one is being written leaves the earlier file of that name as it was,
     at worst with a hidden `.jxu-*.tmp` beside it.
     """
-    from .._solver._loop_kernels import apply_on_import, user_flags
+    from .._internal._loop_kernels import apply_on_import, user_flags
 
     # XLA_FLAGS as the user set it, without the loop-kernel option the import added.
     user_xla_flags = user_flags(os.environ.get("XLA_FLAGS"))
@@ -455,7 +428,9 @@ def main(argv: list[str] | None = None) -> int:
 
             enable_compilation_cache()
         # Latency-bound commands run on the host CPU where the default backend is an
-        # accelerator (`internal.on_host`); the bench measures what Python users get.
+        # accelerator (`_internal.on_host`); the bench measures what Python users get.
+        from .._internal._placement import on_host
+
         placement = contextlib.nullcontext() if args.command == "bench" else on_host()
         with placement:
             return _flushed(int(args.func(args)))

@@ -5,9 +5,9 @@ Light to import: everything heavy is imported inside the handler.
 
 from __future__ import annotations
 
-from ..internal._cli import input_errors, output_errors
-from ..internal._errors import EXIT_OK
-from ..internal._text import printable
+from .._internal._cli import input_errors, output_errors
+from .._internal._errors import EXIT_OK
+from .._internal._text import printable
 
 
 def add_reproduce(commands) -> None:
@@ -24,7 +24,7 @@ def add_reproduce(commands) -> None:
 
 
 def _run_reproduce(args) -> int:
-    from ..internal._io import check_output_dir
+    from .._internal._io import check_output_dir
     from ..paper._reproduce import FIGURES, SUMMARY, reproduce
 
     with input_errors():

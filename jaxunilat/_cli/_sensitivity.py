@@ -5,7 +5,7 @@ Light to import: everything heavy is imported inside the handler.
 
 from __future__ import annotations
 
-from ..internal._errors import EXIT_OK, InputError, RunError, UsageError
+from .._internal._errors import EXIT_OK, InputError, RunError, UsageError
 
 
 def add_sensitivity(commands) -> None:

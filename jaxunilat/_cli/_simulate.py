@@ -13,9 +13,9 @@ import warnings
 
 import numpy as np
 
-from ..internal._cli import input_errors, output_errors
-from ..internal._errors import EXIT_OK, InputError, RunError, UsageError
-from ..internal._text import printable
+from .._internal._cli import input_errors, output_errors
+from .._internal._errors import EXIT_OK, InputError, RunError, UsageError
+from .._internal._text import printable
 from ._args import (
     add_solver_knobs,
     check_plot_format,
@@ -102,9 +102,9 @@ def _add_simulate_ball(models) -> None:
 
 def _build_ball(args):
     """The `Ball` and initial state (x0 [m], v0 [m/s]) that the flags describe."""
+    from .._internal._validate import check_range
     from .._models._ball import PAPER_DRAG, PAPER_GAP, Ball
     from .._models._heaviside import heaviside
-    from ..internal._validate import check_range
 
     gap = PAPER_GAP if args.gap is None else args.gap
     check_range("gap", gap, lo=0.0, lo_open=True, unit="m")
@@ -126,7 +126,7 @@ def _build_ball(args):
 
 
 def _check_outputs(args) -> None:
-    from ..internal._io import check_output_paths
+    from .._internal._io import check_output_paths
 
     if args.events is not None and args.solver != "event":
         raise UsageError(f"--events needs --solver event (got --solver {args.solver})")
@@ -286,7 +286,7 @@ def _run_simulate_ball(args) -> int:
 
 def _write_ball_outputs(args, ball, samples, table, summary) -> list[tuple[str, str]]:
     """Write --out, --plot and --events (those given); the summary lines that say so."""
-    from ..internal._io import write_csv
+    from .._internal._io import write_csv
 
     ts, x, v = samples
     lines = []
@@ -371,8 +371,8 @@ def add_simulate_coupling(models) -> None:
 
 
 def _build_coupling(example, params, reading, h):
+    from .._internal._validate import check_range
     from .._models._coupling import Coupling
-    from ..internal._validate import check_range
 
     check_range("h", h, lo=0.0, unit="N*s/rad")
     with warnings.catch_warnings(record=True) as caught:
@@ -425,9 +425,9 @@ def _coupling_failure(args, knobs, status) -> str:
 
 
 def _run_simulate_coupling(args) -> int:
+    from .._internal._io import check_output_paths
+    from .._internal._validate import check_range
     from .._solver._simulate import Status, simulate
-    from ..internal._io import check_output_paths
-    from ..internal._validate import check_range
 
     check_range("t1", args.t1, lo=0.0, lo_open=True, unit="s")
     if args.solver == "rk4" and args.dt is None:
@@ -511,7 +511,7 @@ def _write_coupling_outputs(args, model, ts, ys) -> list[tuple[str, str]]:
     """Write --out and --plot (those given); the summary lines that say so."""
     lines = []
     if args.out is not None:
-        from ..internal._io import write_csv
+        from .._internal._io import write_csv
 
         with output_errors("--out", args.out):
             write_csv(args.out, COUPLING_HEADER, [ts] + [ys[k] for k in COUPLING_HEADER[1:]])

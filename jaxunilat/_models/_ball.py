@@ -11,8 +11,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
 
-from ..internal._errors import InputError
-from ..internal._validate import float_field, is_concrete
+from .._internal._errors import InputError
+from .._internal._validate import float_field, is_concrete
 from . import _rest_smooth
 from ._contact import AbstractContactLaw, KelvinVoigt, NoClosedFormError
 from ._flight import apex_rise, apex_time, fall_time, flight_state, longest_fall, rise_time

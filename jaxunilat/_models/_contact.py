@@ -37,7 +37,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike
 
-from ..internal._validate import InputTypeError, check_range, real_number
+from .._internal._validate import InputTypeError, check_range, real_number
 from . import _rest, _rest_smooth
 from ._heaviside import AbstractHeaviside, Exact
 
@@ -78,6 +78,11 @@ class AbstractContactLaw(eqx.Module):
     - `impact_scales`, `units`: the time and depth scales of one impact (`identify`'s
       simulated restitution curve sets its horizon and tolerance from them) and the
       units of κ and k_r (`identify`'s input checks).
+    - `restitution_depends_on_speed`: whether e and t_c of one impact change with the
+      impact speed (`identify`'s tolerance of a fitted e against the flights' closed
+      form, its e(v) misfit test, and where its start needs simulated impacts).
+    - `step_time_scale`: what `rk4_step_limit`'s contact time is, in words
+      (`simulate`'s message for a dt beyond the limit).
     """
 
     @abc.abstractmethod
@@ -98,19 +103,22 @@ class AbstractContactLaw(eqx.Module):
         """The elastic energy stored in the contact, J."""
 
     @abc.abstractmethod
-    def restitution(self, kappa, k_r, mass, speed) -> Array:
+    def restitution(self, kappa, k_r, mass, speed, xp=jnp) -> Array:
         """The restitution e = |v_out/v_in| of one impact at `speed` (m/s) without
-        gravity, for κ, k_r and the mass m (kg); `NoClosedFormError` without a closed form."""
+        gravity, for κ, k_r and the mass m (kg); `NoClosedFormError` without a closed
+        form. `xp` as for `contact_time`."""
 
     @abc.abstractmethod
-    def contact_time(self, kappa, k_r, mass, speed) -> Array:
+    def contact_time(self, kappa, k_r, mass, speed, xp=jnp) -> Array:
         """The contact time, s, of one impact at `speed` (m/s) without gravity;
-        `NoClosedFormError` without a closed form."""
+        `NoClosedFormError` without a closed form. `xp`: the array namespace, `jnp`
+        (checked arguments, traceable) or `numpy` for plain host numbers (no checks, a
+        few µs: `identify` evaluates it at every residual evaluation)."""
 
     @abc.abstractmethod
-    def parameters_from_restitution(self, e, t_c, mass, speed) -> tuple[Array, Array]:
+    def parameters_from_restitution(self, e, t_c, mass, speed, xp=jnp) -> tuple[Array, Array]:
         """The inverse map (e, t_c (s), m (kg), speed (m/s)) → (κ, k_r);
-        `NoClosedFormError` without a closed form."""
+        `NoClosedFormError` without a closed form. `xp` as for `contact_time`."""
 
     @abc.abstractmethod
     def rk4_step_limit(self, kappa, k_r, mass, gravity, speed, xp=jnp) -> tuple[Array, Array]:
@@ -152,6 +160,18 @@ class AbstractContactLaw(eqx.Module):
     def units(self) -> dict[str, str]:
         """The units of κ and k_r: `{"kappa": ..., "k_r": ...}`."""
 
+    @property
+    @abc.abstractmethod
+    def restitution_depends_on_speed(self) -> bool:
+        """Whether the restitution and contact time of one impact depend on the impact
+        speed (False: one e and t_c at every speed, in closed form)."""
+
+    @property
+    @abc.abstractmethod
+    def step_time_scale(self) -> str:
+        """What the contact time that `rk4_step_limit` returns is, in words, for
+        `simulate`'s message when dt is beyond the limit (e.g. "pi/omega_d")."""
+
 
 class _AbstractLinearLaw(AbstractContactLaw):
     """What the two linear spring–damper laws share: the spring κδ, its potential
@@ -191,6 +211,15 @@ class _AbstractLinearLaw(AbstractContactLaw):
     def units(self):
         return {"kappa": "N/m", "k_r": "N*s/m"}
 
+    @property
+    def restitution_depends_on_speed(self):
+        """False: a linear law's e and t_c are the same at every impact speed."""
+        return False
+
+    @property
+    def step_time_scale(self):
+        return "pi/omega_d"
+
 
 @typing.final
 class KelvinVoigt(_AbstractLinearLaw):
@@ -213,20 +242,32 @@ class KelvinVoigt(_AbstractLinearLaw):
             f = f + k_r * pen_rate * on
         return f
 
-    def restitution(self, kappa, k_r, mass, speed=None):
-        """e = exp(−πζ/√(1 − ζ²)), independent of the speed (see `restitution`)."""
+    def restitution(self, kappa, k_r, mass, speed=None, xp=jnp):
+        """e = exp(−πζ/√(1 − ζ²)), independent of the speed (see `restitution`); 0 when
+        not underdamped."""
         del speed
-        return restitution(kappa, k_r, mass)
+        if xp is jnp:
+            return restitution(kappa, k_r, mass)
+        zeta = k_r / (2.0 * xp.sqrt(kappa * mass))
+        safe = xp.where(zeta < 1, zeta, 0.5)
+        return xp.where(zeta < 1, xp.exp(-xp.pi * safe / xp.sqrt(1 - safe**2)), 0.0)
 
-    def contact_time(self, kappa, k_r, mass, speed=None):
-        """t_c = π/ω_d, s, independent of the speed (see `contact_time`)."""
+    def contact_time(self, kappa, k_r, mass, speed=None, xp=jnp):
+        """t_c = π/ω_d, s, independent of the speed (see `contact_time`); inf when not
+        underdamped."""
         del speed
-        return contact_time(kappa, k_r, mass)
+        if xp is jnp:
+            return contact_time(kappa, k_r, mass)
+        omega2 = kappa / mass - (k_r / (2.0 * mass)) ** 2
+        return xp.where(omega2 > 0, xp.pi / xp.sqrt(xp.where(omega2 > 0, omega2, 1.0)), xp.inf)
 
-    def parameters_from_restitution(self, e, t_c, mass, speed=None):
+    def parameters_from_restitution(self, e, t_c, mass, speed=None, xp=jnp):
         """κ = m(π² + ln²e)/t_c², k_r = −2 m ln e/t_c (see `parameters_from_restitution`)."""
         del speed
-        return parameters_from_restitution(e, t_c, mass)
+        if xp is jnp:
+            return parameters_from_restitution(e, t_c, mass)
+        le = xp.log(e)
+        return mass * (xp.pi**2 + le**2) / t_c**2, -2.0 * mass * le / t_c
 
 
 @typing.final
@@ -250,13 +291,13 @@ class ClampedKelvinVoigt(_AbstractLinearLaw):
             return spring
         return spring + jnp.clip(k_r * pen_rate * on, -spring, spring)
 
-    def restitution(self, kappa, k_r, mass, speed=None):
+    def restitution(self, kappa, k_r, mass, speed=None, xp=jnp):
         _no_closed_form(self, "restitution", "; simulate one impact instead")
 
-    def contact_time(self, kappa, k_r, mass, speed=None):
+    def contact_time(self, kappa, k_r, mass, speed=None, xp=jnp):
         _no_closed_form(self, "contact time", "; simulate one impact instead")
 
-    def parameters_from_restitution(self, e, t_c, mass, speed=None):
+    def parameters_from_restitution(self, e, t_c, mass, speed=None, xp=jnp):
         _no_closed_form(self, "map (e, t_c) -> (kappa, k_r)")
 
 
@@ -306,17 +347,19 @@ class HuntCrossley(AbstractContactLaw):
         n1 = self.exponent + 1.0
         return jnp.where(inside, kappa * safe**n1 / n1, jnp.zeros_like(pen))
 
-    def restitution(self, kappa, k_r, mass, speed):
+    def restitution(self, kappa, k_r, mass, speed, xp=jnp):
         _no_closed_form(self, "restitution", "; simulate one impact instead")
 
-    def contact_time(self, kappa, k_r, mass, speed):
-        """The undamped contact time, s (see `hunt_crossley_contact_time`); only for
-        `k_r=None` (damping shortens it, and that has no closed form)."""
+    def contact_time(self, kappa, k_r, mass, speed, xp=jnp):
+        """The undamped contact time, s (see `hunt_crossley_contact_time`, which computes
+        plain numbers on the host whatever `xp`); only for `k_r=None` (damping shortens
+        it, and that has no closed form)."""
+        del xp
         if k_r is not None:
             _no_closed_form(self, "contact time with damping", "; pass k_r=None for the undamped time")
         return hunt_crossley_contact_time(kappa, mass, speed, self.exponent)
 
-    def parameters_from_restitution(self, e, t_c, mass, speed):
+    def parameters_from_restitution(self, e, t_c, mass, speed, xp=jnp):
         _no_closed_form(self, "map (e, t_c) -> (kappa, k_r)")
 
     def rk4_step_limit(self, kappa, k_r, mass, gravity, speed, xp=jnp):
@@ -366,6 +409,16 @@ class HuntCrossley(AbstractContactLaw):
     def units(self):
         return {"kappa": f"N/m^{self.exponent:g}", "k_r": f"N*s/m^{self.exponent + 1.0:g}"}
 
+    @property
+    def restitution_depends_on_speed(self):
+        """True: e falls as the impact speed rises (≈ 1 − (2/3)χv), t_c ∝ v^(−1/(n+1))."""
+        return True
+
+    @property
+    def step_time_scale(self):
+        """The law stiffens with depth: its t_c is taken at the deepest penetration."""
+        return "pi/omega at the deepest penetration the initial energy allows"
+
 
 #: The valid ranges of the helpers' parameters (`check_range` keywords).
 _RANGES = {
@@ -389,7 +442,7 @@ def _checked(**values) -> tuple[tuple[Array, ...], Array | bool]:
     values out of `_RANGES` raise `ValueError` naming the parameter, the value and the
     range; traced ones give `valid`, false where any is out of range (or not finite),
     which the helper turns into NaN. Returns (the values as arrays, valid)."""
-    from ..internal._validate import _within, is_concrete
+    from .._internal._validate import _within, is_concrete
 
     arrays = _real(**values)
     valid = True

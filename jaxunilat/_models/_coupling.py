@@ -38,8 +38,8 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array
 
-from ..internal._errors import InputError
-from ..internal._validate import check_choice, float_field
+from .._internal._errors import InputError
+from .._internal._validate import check_choice, float_field
 from ._contact import AbstractContactLaw, KelvinVoigt, NoClosedFormError
 from ._heaviside import AbstractHeaviside, Exact
 from ._model import AbstractContactModel, AbstractSwitchedModel

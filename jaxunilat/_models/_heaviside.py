@@ -24,8 +24,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike
 
-from ..internal._errors import InputError
-from ..internal._validate import check_range, real_number
+from .._internal._errors import InputError
+from .._internal._validate import check_range, real_number
 
 
 class AbstractHeaviside(eqx.Module):

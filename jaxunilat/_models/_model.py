@@ -54,9 +54,9 @@ class AbstractModel(eqx.Module):
 
     def runtime_checks(self) -> list[tuple[str, Array]]:
         """`(message, valid)` per parameter check, for traced parameters (see
-        `jaxunilat.internal._validate.runtime_check`): what `__check_init__` checks on concrete
+        `jaxunilat._internal._validate.runtime_check`): what `__check_init__` checks on concrete
         values, which `simulate` evaluates once before the solve."""
-        from ..internal._validate import runtime_check
+        from .._internal._validate import runtime_check
 
         return [runtime_check(name, value, **kw) for name, value, kw in self._ranges()]
 
@@ -174,7 +174,7 @@ class AbstractContactModel(AbstractModel):
     ) -> None:
         """The concrete checks of the `heaviside` and `law` fields and `_ranges`: their
         types, then every range (`check_range` skips traced values)."""
-        from ..internal._validate import check_range, check_type
+        from .._internal._validate import check_range, check_type
 
         check_type("heaviside", self.heaviside, AbstractHeaviside, "Exact(), Logistic(eps) or Softplus(eps)")
         check_type("law", self.law, AbstractContactLaw, law_types)

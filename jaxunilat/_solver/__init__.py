@@ -4,9 +4,12 @@ kernels, sweeps, and the observations read off a solution.
 Design notes: `README.md` in this folder.
 """
 
+from .._internal._loop_kernels import (
+    loop_kernel_bytes as loop_kernel_bytes,
+    use_loop_kernels as use_loop_kernels,
+)
 from ._coupling_impacts import IMPACT_COLUMNS as IMPACT_COLUMNS, impact_table as impact_table
 from ._event import EventRecord as EventRecord
-from ._loop_kernels import loop_kernel_bytes as loop_kernel_bytes, use_loop_kernels as use_loop_kernels
 from ._observe import (
     CONTACT_COLUMNS as CONTACT_COLUMNS,
     apexes as apexes,

@@ -51,7 +51,7 @@ import jax
 import jax.numpy as jnp
 from jax.extend.core import jaxpr_as_fun, jaxprs_in_params
 
-from ..internal._errors import InputError
+from .._internal._errors import InputError
 
 #: The environment variable that forces a batching rule: "rows" or "batch".
 ENV = "JAXUNILAT_VMAP"

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..internal._errors import InputError
+from .._internal._errors import InputError
 from ._event import ENTRY, EXIT
 
 IMPACT_COLUMNS = ("wall", "t_in", "t_out", "rate_in", "rate_out", "restitution", "peak_force")

@@ -11,8 +11,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
+from .._internal._errors import InputError
 from .._models._model import AbstractSwitchedModel
-from ..internal._errors import InputError
 from ._event import ENTRY, EXIT, EXTREMUM, EventRecord
 
 CONTACT_COLUMNS = (

@@ -11,8 +11,8 @@ import equinox as eqx
 import numpy as np
 from jaxtyping import Array
 
-from ..internal._errors import InputError
-from ..internal._validate import as_float_array, check_choice, check_range, is_concrete
+from .._internal._errors import InputError
+from .._internal._validate import as_float_array, check_choice, check_range, is_concrete
 from ._device_cache import DeviceCache
 
 _rk4_tableau = dfx.ButcherTableau(

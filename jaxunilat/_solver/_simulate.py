@@ -12,6 +12,7 @@ import sys
 import threading
 import warnings
 from collections import Counter
+from collections.abc import Callable
 
 import diffrax as dfx
 import equinox as eqx
@@ -21,13 +22,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
 
-from .._models._contact import RK4_STEPS_PER_CONTACT, HuntCrossley
-from .._models._heaviside import Exact
-from .._models._model import AbstractCanRest, AbstractContactModel, AbstractModel, AbstractSwitchedModel
-from ..internal._errors import InputError
-from ..internal._executables import kept_call
-from ..internal._placement import on_host
-from ..internal._validate import (
+from .._internal import _loop_kernels
+from .._internal._errors import InputError
+from .._internal._executables import kept_call
+from .._internal._placement import on_host
+from .._internal._validate import (
     InputTypeError,
     as_float_array,
     check_choice,
@@ -36,7 +35,9 @@ from ..internal._validate import (
     real_number,
     runtime_check,
 )
-from . import _loop_kernels
+from .._models._contact import RK4_STEPS_PER_CONTACT
+from .._models._heaviside import Exact
+from .._models._model import AbstractCanRest, AbstractContactModel, AbstractModel, AbstractSwitchedModel
 from ._batching import batching_mode, rowwise_differentiable
 from ._device_cache import DeviceCache
 from ._event import EventRecord, event_solve
@@ -436,17 +437,25 @@ def _run(model, y0, t0, t1, ts, settings, outputs, throw):
     `equinox.EquinoxRuntimeError` that carries only our message (`_solver_error`)."""
     args = (model, y0, t0, t1, ts, settings)
     static = (outputs, throw, batching_mode())
-    try:
+    with _solver_failures():
         # throw's errors are host callbacks, which a kept executable cannot hold.
         sol = _solve(*args, *static) if throw else kept_call("simulate", _solve, args, static)
         if throw and not isinstance(sol.status, jax.core.Tracer):
             sol.status.block_until_ready()
+    return sol
+
+
+@contextlib.contextmanager
+def _solver_failures():
+    """Raise a solver failure inside the block as the solver's message alone
+    (`_solver_error`); any other error passes unchanged."""
+    try:
+        yield
     except (jax.errors.JaxRuntimeError, ValueError) as err:
         clean = _solver_error(err)
         if clean is None:
             raise
         raise clean from None
-    return sol
 
 
 #: Where equinox's message ends in the text of the error JAX raises for a failed host
@@ -470,6 +479,25 @@ def _solver_error(err: BaseException) -> eqx.EquinoxRuntimeError | None:
         return None
     message = _EQX_ADVICE.split(text[start + len(marker) :], maxsplit=1)[0].strip()
     return eqx.EquinoxRuntimeError(message or "jaxunilat.simulate: the run failed")
+
+
+def one_failure_message(fn: Callable) -> Callable:
+    """Wrap a public function that runs solves (`sweep`, the `analysis` studies): a solver
+    failure inside it raises `equinox.EquinoxRuntimeError` with the solver's message alone
+    (`_solver_error`), as `simulate` does, instead of JAX's callback traceback and
+    equinox's advice. A concrete result is waited for, so that the failure surfaces here;
+    under a user's `jax.jit` the wrapper only passes the call through."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with _solver_failures():
+            out = fn(*args, **kwargs)
+            leaves = [leaf for leaf in jax.tree_util.tree_leaves(out) if isinstance(leaf, jax.Array)]
+            if leaves and not any(isinstance(leaf, jax.core.Tracer) for leaf in leaves):
+                jax.block_until_ready(leaves)
+        return out
+
+    return wrapper
 
 
 class _OwnFailureLog(logging.Filter):
@@ -829,9 +857,7 @@ def _check_rk4_step(model, dt, y0) -> None:
     if not step > limit:
         return
     if math.isfinite(t_c) and limit == t_c / RK4_STEPS_PER_CONTACT:
-        # Hunt–Crossley stiffens with depth: its t_c is taken at the deepest penetration.
-        stiffens = isinstance(model, AbstractContactModel) and isinstance(model.law, HuntCrossley)
-        form = "pi/omega at the deepest penetration the initial energy allows" if stiffens else "pi/omega_d"
+        form = model.law.step_time_scale if isinstance(model, AbstractContactModel) else "pi/omega_d"
         why = f"a tenth of the contact time t_c = {form} = {t_c:.3g} s"
     else:
         why = "the time scale of the contact's damping (1/|lambda| of its fastest mode)"

@@ -56,9 +56,9 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from ..internal._errors import InputError
+from .._internal._errors import InputError
 from ._batching import batching_mode
-from ._simulate import _TRACES
+from ._simulate import _TRACES, one_failure_message
 
 AXIS = "batch"
 
@@ -285,6 +285,7 @@ def _check_same(args, program: int | None) -> None:
         )
 
 
+@one_failure_message
 def sweep(
     fn: Callable[..., Any],
     *args: Any,

@@ -26,9 +26,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._solver._simulate import _TRACES
-from ..internal._errors import InputError
-from ..internal._validate import check_finite, check_range
+from .._internal._errors import InputError
+from .._internal._validate import check_finite, check_range
+from .._solver._simulate import _TRACES, one_failure_message
 
 #: The differentiated parameters (log multipliers), in this order.
 PARAMETERS = ("kappa", "k_r")
@@ -122,6 +122,7 @@ def _frozen(settings):
     return tuple(sorted({**_DEFAULT_SETTINGS, **settings}.items()))
 
 
+@one_failure_message
 def window_loss(model, y0, t_start, horizon, *, samples: int = 201, **settings) -> float:
     """L(T) = the mean of T_ξ² + T_η² on `samples` uniform times over [t_start, t_start + T], N².
 
@@ -135,6 +136,7 @@ def window_loss(model, y0, t_start, horizon, *, samples: int = 201, **settings) 
     return float(_window(jnp.zeros(len(PARAMETERS)), model, *args, samples, _frozen(settings))[0])
 
 
+@one_failure_message
 def state_at(model, t_start: float, *, samples: int = 201, **settings) -> np.ndarray:
     """The coupling's state (ψ_ξ, ψ̇_ξ, ψ_η, ψ̇_η) at `t_start`, s, from the paper's initial state."""
     y0 = jnp.asarray(model.paper_initial_state(), float)
@@ -142,6 +144,7 @@ def state_at(model, t_start: float, *, samples: int = 201, **settings) -> np.nda
     return np.asarray(_window(jnp.zeros(len(PARAMETERS)), model, *args, samples, _frozen(settings))[1])
 
 
+@one_failure_message
 def gradient_growth(
     model=None,
     horizons=(0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0),

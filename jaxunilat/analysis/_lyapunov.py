@@ -66,7 +66,7 @@ from jaxtyping import Array
 from .._models._coupling import Coupling
 from .._models._heaviside import Exact, Logistic
 from .._models._model import AbstractModel
-from .._solver._simulate import _TRACES, simulate
+from .._solver._simulate import _TRACES, one_failure_message, simulate
 
 
 def _log_norm(x: Array) -> Array:
@@ -176,6 +176,7 @@ def _smoothed_ftle(model, t0, t1, eps_fraction, rtol, atol, max_steps):
     return jnp.where(sol.status == 0, (log_norm[1] - log_norm[0]) / (t1 - t0), jnp.nan)
 
 
+@one_failure_message
 def ftle(
     model: Coupling,
     t0: float,

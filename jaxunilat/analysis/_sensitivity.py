@@ -31,8 +31,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._solver._simulate import _TRACES
-from ..internal._errors import InputError
+from .._internal._errors import InputError
+from .._solver._simulate import _TRACES, one_failure_message
 
 #: The coupling's parameters `coupling_sensitivity` differentiates in, in its table's order.
 COUPLING_PARAMETERS = ("clearance", "alpha", "b", "kappa", "k_r", "h")
@@ -95,6 +95,7 @@ def _coupling_run(model, t1, ts, settings):
     return simulate(model, model.paper_initial_state(), t1, ts=ts, outputs=_OUTPUTS, **dict(settings))
 
 
+@one_failure_message
 def locate_peak(model, t1, *, samples: int = 10001, **settings) -> tuple[float, str]:
     """The time (s) and force component ('T_xi' or 'T_eta') of the peak elastic force.
 
@@ -162,6 +163,7 @@ def _coupling_jacobian(model, t1, grid, settings):
     return out, jac
 
 
+@one_failure_message
 def coupling_features(model, t1, *, samples: int = 10001, **settings) -> np.ndarray:
     """(peak elastic force [N], RMS elastic force [N]) of a coupling run, with the peak located.
 
@@ -183,6 +185,7 @@ def _hashable(settings):
 _DEFAULT_SETTINGS = dict(solver="event", rtol=1e-11, atol=1e-14, max_steps=32_768, max_events=4096)
 
 
+@one_failure_message
 def coupling_sensitivity(
     example: int = 2,
     *,
@@ -323,6 +326,7 @@ def _ball_jacobian(base, t1, n, settings):
     return out[0], jac[0], jac[1]
 
 
+@one_failure_message
 def ball_sensitivity(
     example: int = 2,
     *,

@@ -6,7 +6,7 @@ its goals, and the scipy reference it measures errors against.
 `bench.json` (files written before the goals had names, keyed P1–P5 and P7–P10, come
 back with today's keys: `upgrade`); `GOALS` holds each goal's target and unit.
 Rows registered by other packages (entry points of the group `jaxunilat.bench`) find the
-bundled data sets with `jaxunilat.internal.bundled_data`. The peers and the reference need scipy
+bundled data sets with `jaxunilat._internal.bundled_data`. The peers and the reference need scipy
 (the `bench` extra); importing this module does not load it.
 """
 

@@ -5,5 +5,5 @@
 - `loop_kernel_bytes()`: the size of the CPU loop kernels compiled so far.
 """
 
-from .._solver._loop_kernels import loop_kernel_bytes as loop_kernel_bytes
+from .._internal._loop_kernels import loop_kernel_bytes as loop_kernel_bytes
 from .._solver._simulate import trace_counts as trace_counts

@@ -16,7 +16,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..internal._io import write_atomically
+from .._internal._io import write_atomically
 
 #: The figures `reproduce` writes (file name → what it shows).
 FIGURES = {

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..internal._io import write_atomically
+from .._internal._io import write_atomically
 
 if TYPE_CHECKING:  # matplotlib is imported when a plot is made, not with the package
     from matplotlib.axes import Axes

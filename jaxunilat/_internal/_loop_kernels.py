@@ -33,9 +33,10 @@ from __future__ import annotations
 
 import os
 import re
+import sys
 import warnings
 
-from ..internal._errors import InputError
+from ._errors import InputError
 
 OPTION = "xla_cpu_small_while_loop_byte_threshold"
 #: Loops that touch up to 1 MiB per iteration become one kernel: the event mode's loop
@@ -126,6 +127,8 @@ def warn_if_missing(stacklevel: int = 3) -> None:
 
 def _backend_started() -> bool:
     """Whether JAX has started a backend (after which XLA_FLAGS is no longer read)."""
+    if "jax" not in sys.modules:  # not imported: nothing started (and nothing to import here)
+        return False
     try:
         from jax._src import xla_bridge
     except ImportError:  # pragma: no cover - a JAX without this module

@@ -1,19 +1,14 @@
-"""What a `jaxunilat` command needs from the command line, also one that another package
-(e.g. `identify`) registers.
+"""What a `jaxunilat` command needs from the command line: jaxunilat's own and those of
+`jaxunilat.identify`.
 
-**Registering a command.** A package adds commands to `jaxunilat` through the entry-point
-group `jaxunilat.commands` (`COMMANDS_GROUP`), in its `pyproject.toml`:
-
-    [project.entry-points."jaxunilat.commands"]
-    identify = "identify._cli._identify:register"
-
-Each entry point is a function `register(commands) -> None`. `commands` is the
-`argparse` subparsers object of `jaxunilat`; `register` adds one parser named as the
-entry point (`commands.add_parser(name, help=..., description=...)`), its arguments, and
+**A command.** Each command is one line of `jaxunilat._cli._main.COMMANDS`,
+`(name, "module:function")`. `function(commands) -> None` gets the `argparse`
+subparsers object of `jaxunilat` and adds one parser named `name`
+(`commands.add_parser(name, help=..., description=...)`), its arguments, and
 `set_defaults(func=handler)`, where `handler(args) -> int` runs the command and returns
-its exit code. Keep the module light to import (a command's parser is built when the command
-line names it, and `jaxunilat --help` reads a plain literal `help="..."` of `register`
-without importing it): heavy imports go inside the handler.
+its exit code. Keep the module light to import (a command's parser is built when the
+command line names it, and `jaxunilat --help` reads a plain literal `help="..."` of the
+function without importing it): heavy imports go inside the handler.
 
 **Errors.** A handler raises `UsageError` for arguments that do not go together and
 `InputError` for a value or file the user gave that is invalid (both exit 2; wrap code
@@ -32,9 +27,6 @@ from collections.abc import Iterator
 
 from ._errors import InputError, RunError
 from ._text import printable
-
-#: The entry-point group in which packages register `jaxunilat` commands.
-COMMANDS_GROUP = "jaxunilat.commands"
 
 
 @contextlib.contextmanager

@@ -405,7 +405,7 @@ def bundled_data(pattern: str = "*.csv") -> list[str]:
     """
     import glob
 
-    here = os.path.dirname(os.path.abspath(__file__))  # jaxunilat/internal/
+    here = os.path.dirname(os.path.abspath(__file__))  # jaxunilat/_internal/
     package = os.path.dirname(here)
     for folder in (
         os.path.join(package, "_data"),

@@ -6,7 +6,7 @@ commands then compute. JAX can keep compiled executables on disk
 (`jax_compilation_cache_dir`), but still traces and lowers a program to find its key
 (about 1 s for the event mode); `simulate`'s top-level calls and `identify`'s residuals
 therefore also keep their executables under a key computed before tracing
-(`jaxunilat.internal._executables`, in the `executables` folder). The command line turns
+(`jaxunilat._internal._executables`, in the `executables` folder). The command line turns
 both on before anything compiles, in a user cache directory:
 
 - `$JAXUNILAT_CACHE_DIR` if set, else `$XDG_CACHE_HOME/jaxunilat`, else
@@ -24,8 +24,8 @@ directory turns both caches off for the run, which says so in one line on stderr
 (`jaxunilat: warning: ...`, once per process) and otherwise goes on as with `--no-cache`.
 The check protects JAX's own cache too, whose entries are compiled programs although
 not pickles; the executables are besides authenticated (an HMAC under a key of yours:
-`jaxunilat.internal._executables`). The Python API leaves JAX's settings alone unless asked:
-`jaxunilat.use_compilation_cache()` (this module's `enable_compilation_cache`) turns the
+`jaxunilat._internal._executables`). The Python API leaves JAX's settings alone unless asked:
+`jaxunilat.enable_compilation_cache()` turns the
 same caches on for a script or notebook, so that its second run skips XLA compilation
 (`jax.grad` of an event-mode solve compiles for ~20 s on 2 cores). The test suite runs
 without them.
@@ -36,12 +36,6 @@ from __future__ import annotations
 import os
 import sys
 
-from ._executables import (
-    SUBDIR as EXECUTABLES_SUBDIR,
-    ExecutableCache,
-    private_directory,
-    set_executable_cache,
-)
 from ._text import printable
 
 #: Environment variables: the directory, and the opt-out.
@@ -86,7 +80,7 @@ def enable_compilation_cache(path: str | None = None) -> str | None:
     """Turn on JAX's persistent compilation cache in `path` (default `cache_dir()`:
     `$JAXUNILAT_CACHE_DIR`, else `$XDG_CACHE_HOME/jaxunilat`, else `~/.cache/jaxunilat`),
     and the executable cache (`simulate` with `throw=False`, `identify`'s residuals) in its
-    `executables` folder. Public as `jaxunilat.use_compilation_cache`: call it once, before
+    `executables` folder. Public as `jaxunilat.enable_compilation_cache`: call it once, before
     the first computation, in a script or notebook whose programs take long to compile.
 
     Every compiled program is kept (no minimum compile time or size). Returns the
@@ -96,6 +90,13 @@ def enable_compilation_cache(path: str | None = None) -> str | None:
     """
     if cache_disabled():
         return None
+    from ._executables import (
+        SUBDIR as EXECUTABLES_SUBDIR,
+        ExecutableCache,
+        private_directory,
+        set_executable_cache,
+    )
+
     path = cache_dir() if path is None else os.path.abspath(path)
     why = private_directory(path)
     if why is not None:
@@ -113,7 +114,3 @@ def enable_compilation_cache(path: str | None = None) -> str | None:
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     set_executable_cache(executables)
     return path
-
-
-#: The public name (`jaxunilat.use_compilation_cache`).
-use_compilation_cache = enable_compilation_cache
