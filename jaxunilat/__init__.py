@@ -14,8 +14,8 @@ helpers are namespaces: `jaxunilat.analysis`, `jaxunilat.plot`, `jaxunilat.paper
 Importing the package enables float64 in JAX; it never imports matplotlib or scipy. Each
 public name is imported from its module when first used, so `import jaxunilat` itself is
 light (the command line's `--help` imports no JAX): float64 is enabled through the
-`JAX_ENABLE_X64` environment variable, which JAX reads when it is imported, or at once
-where JAX was imported first. It also lets XLA:CPU compile each small loop into one kernel (the event mode's steps run
+`JAX_ENABLE_X64` environment variable, which JAX reads when it is imported (inherited by
+child processes, as `XLA_FLAGS` is), or at once where JAX was imported first. It also lets XLA:CPU compile each small loop into one kernel (the event mode's steps run
 about 10× faster): before JAX starts its backend, it adds
 `--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold=1048576` to the
 `XLA_FLAGS` environment variable (inherited by child processes). Set
