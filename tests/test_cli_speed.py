@@ -54,6 +54,8 @@ def test_help_and_version_import_no_other_package(argv):
     code, top, out = _run_child(argv)
     assert code == 0, out
     assert not {"identify", "optax", "matplotlib", "scipy"} & top, sorted(top)
+    if argv[0] != "simulate":  # the light path: not even JAX or NumPy (simulate's parser imports the models)
+        assert not {"jax", "jaxlib", "numpy"} & top, sorted(top)
     if argv == ["--help"]:
         listed = {line.split()[0] for line in out.splitlines() if line.startswith("    ") and line.split()}
         assert set(IDENTIFY_COMMANDS) <= listed, out
@@ -63,6 +65,7 @@ def test_a_command_of_another_package_is_imported_when_named():
     code, top, out = _run_child(["identify", "--help"])
     assert code == 0 and "identify" in top, out
     assert "usage: jaxunilat identify" in out and "--no-cache" in out, out
+    assert not {"jax", "optax", "matplotlib", "scipy"} & top, sorted(top)  # the identify package is lazy
 
 
 def test_the_help_lines_read_from_the_source_are_the_registered_ones():
