@@ -16,7 +16,8 @@ import sys
 
 import numpy as np
 import pytest
-from jaxunilat.identify._fit._kelvin_voigt import parameters_from_restitution, restitution_and_contact_time
+from jaxunilat.identify._fit._kelvin_voigt import restitution_and_contact_time
+from jaxunilat.identify._fit._setup import contact_parameters
 from reference import kelvin_voigt_contact_time, kelvin_voigt_restitution
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -53,7 +54,7 @@ def test_overdamped_contact_has_no_rebound_and_no_contact_time():
 
 @pytest.mark.parametrize("e, t_c, mass", [(0.955, 1.3e-3, 2.7e-3), (0.3, 5e-3, 0.5), (1.0, 1e-3, 1.0)])
 def test_kelvin_voigt_inverse_round_trips_through_the_reference(e, t_c, mass):
-    kappa, k_r = parameters_from_restitution(e, t_c, mass)
+    kappa, k_r = contact_parameters("kelvin-voigt", e, t_c, mass, 3.0)
     assert kelvin_voigt_restitution(kappa, k_r, mass) == pytest.approx(e, rel=1e-13)
     assert kelvin_voigt_contact_time(kappa, k_r, mass) == pytest.approx(t_c, rel=1e-13)
 
@@ -61,7 +62,7 @@ def test_kelvin_voigt_inverse_round_trips_through_the_reference(e, t_c, mass):
 @pytest.mark.parametrize("args, match", [((0.0, 1e-3, 1.0), "e = "), ((0.5, -1e-3, 1.0), "t_c = ")])
 def test_kelvin_voigt_inverse_rejects_bad_input(args, match):
     with pytest.raises(ValueError, match=match):
-        parameters_from_restitution(*args)
+        contact_parameters("kelvin-voigt", *args, 3.0)
 
 
 _COUNT_COMPILES = """

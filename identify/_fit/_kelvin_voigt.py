@@ -1,9 +1,8 @@
-"""Kelvin–Voigt closed forms on the host, in plain Python floats.
+"""Kelvin–Voigt's e and t_c with their exact gradients on the host, in plain Python floats.
 
-The same formulas as `jaxunilat.restitution`, `jaxunilat.contact_time` and
-`jaxunilat.parameters_from_restitution` [K90 Eq. 3.1–3.3], for the handful of scalars
-the fit needs outside its one compiled evaluator (the start points, the derived e and
-t_c with their gradients). Evaluated with `jax.numpy`, each of their operations would
+The same formulas as `jaxunilat.restitution` and `jaxunilat.contact_time` [K90 Eq.
+3.1–3.3], with their gradients, for the derived e and t_c of a fit (`_derived`); the
+start's inverse is the law's own host closed form (`_setup.contact_parameters`). Evaluated with `jax.numpy`, each of their operations would
 compile on first use (a cold fit spent ~0.2 s on them); here nothing compiles. The
 agreement with the jaxunilat functions and with `jax.grad` is tested.
 
@@ -24,23 +23,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
-from jaxunilat._internal import check_range
-
-
-def parameters_from_restitution(e: float, t_c: float, mass: float) -> tuple[float, float]:
-    """(e, t_c, m) → (κ, k_r): κ = m(π² + ln²e)/t_c², k_r = −2 m ln e / t_c.
-
-    **Arguments:** `e` in (0, 1], `t_c` (s) > 0, `mass` (kg) > 0.
-
-    **Returns:** `(kappa, k_r)` in N/m and N·s/m, as floats.
-    """
-    check_range("e", e, lo=0.0, hi=1.0, lo_open=True)
-    check_range("t_c", t_c, lo=0.0, lo_open=True, unit="s")
-    check_range("mass", mass, lo=0.0, lo_open=True, unit="kg")
-    e, t_c, mass = float(e), float(t_c), float(mass)
-    le = math.log(e)
-    return mass * (math.pi**2 + le**2) / t_c**2, -2.0 * mass * le / t_c
 
 
 def restitution_and_contact_time(

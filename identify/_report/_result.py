@@ -12,7 +12,7 @@ from decimal import ROUND_HALF_UP, Decimal
 
 import numpy as np
 
-from .._fit._estimate import ABSURD, Bound, Estimate
+from .._fit._estimate import ABSURD, Bound, Estimate, finite_or_none
 from .._fit._outcome import VERDICTS, FileFit, FitOutcome
 from .._fit._problem import PARAMETERS, TRACE_ONLY
 from .._fit._uncertainty import P_INCONSISTENT
@@ -72,7 +72,7 @@ class FitResult(FitOutcome):
             "derived": {n: self.derived[n].to_json() for n in ("restitution", "contact_time")},
             "identifiable": {n: bool(v) for n, v in self.identifiable.items()},
             "withheld": dict(self.withheld),
-            "correlation": [[1.0, _finite_or_none(k)], [_finite_or_none(k), 1.0]],
+            "correlation": [[1.0, finite_or_none(k)], [finite_or_none(k), 1.0]],
             "converged": bool(self.converged),
             "nuisance": {
                 n: self.params[n].to_json()
@@ -82,7 +82,7 @@ class FitResult(FitOutcome):
             "fitted": list(self.free),
             "correlation_all": {
                 "names": list(self.free),
-                "matrix": [[_finite_or_none(v) for v in row] for row in np.asarray(self.correlation)],
+                "matrix": [[finite_or_none(v) for v in row] for row in np.asarray(self.correlation)],
             },
             "mass": float(self.data.mass),
             "scene": self.data.scene,
@@ -93,7 +93,7 @@ class FitResult(FitOutcome):
             "sigma": self.sigma,
             "sigma_source": self.sigma_source,
             "goodness_of_fit": {
-                k: _finite_or_none(v) if isinstance(v, float) else v for k, v in self.goodness.items()
+                k: finite_or_none(v) if isinstance(v, float) else v for k, v in self.goodness.items()
             },
             "message": self.message,
             "method": self.method,
@@ -125,8 +125,8 @@ class FitResult(FitOutcome):
             if self.profile is None
             else {
                 "kappa": [float(v) for v in self.profile.kappa],
-                "delta_chi2": [_finite_or_none(v) for v in self.profile.delta_chi2],
-                "ci95": [_finite_or_none(v) for v in self.profile.ci95],
+                "delta_chi2": [finite_or_none(v) for v in self.profile.delta_chi2],
+                "ci95": [finite_or_none(v) for v in self.profile.ci95],
                 "failed": [float(v) for v in self.profile.failed],
                 "bound": _clean_json(self.profile.bound.to_json()),
             },
@@ -529,12 +529,6 @@ def _profile_end(value: float, unit: str, side: str) -> str:
     return f"{value:.6g} {unit}"
 
 
-def _finite_or_none(value):
-    """A float, or None where it is not finite (JSON has no inf or NaN)."""
-    value = float(value)
-    return value if math.isfinite(value) else None
-
-
 def _clean_json(value):
     """Plain JSON types: floats finite or None, numpy scalars and arrays unpacked."""
     if isinstance(value, Mapping):
@@ -546,7 +540,7 @@ def _clean_json(value):
     if isinstance(value, (int, np.integer)):
         return int(value)
     if isinstance(value, (float, np.floating)):
-        return _finite_or_none(value)
+        return finite_or_none(value)
     return value
 
 
