@@ -11,9 +11,8 @@ Each public name is imported from its module when first used, so that the comman
 `jaxunilat identify --help` imports no JAX, optax or fit.
 """
 
-import importlib
-
 import jaxunilat as _jaxunilat  # noqa: F401  (float64, before any JAX import)
+from jaxunilat._internal import lazy_names
 
 #: The namespaces (subpackages), imported when first used.
 _NAMESPACES = ("plot",)
@@ -71,17 +70,4 @@ _PUBLIC = {
 __all__ = sorted([*_NAMESPACES, *_PUBLIC])
 
 
-def __getattr__(name: str):
-    """A public name, imported from its module when first used (`_PUBLIC`), or a namespace."""
-    if name in _NAMESPACES:
-        value = importlib.import_module(f".{name}", __name__)
-    elif name in _PUBLIC:
-        value = getattr(importlib.import_module(_PUBLIC[name], __name__), name)
-    else:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__getattr__, __dir__ = lazy_names(__name__, _PUBLIC, _NAMESPACES)

@@ -24,10 +24,10 @@ JAX computation: a backend already started cannot take the option, and the first
 `simulate` then warns once with the fix. `use_loop_kernels()` sets it explicitly.
 """
 
-import importlib
 import os
 import sys
 
+from ._internal._lazy import lazy_names
 from ._internal._loop_kernels import apply_on_import as _apply_loop_kernels
 
 
@@ -116,23 +116,15 @@ _ALIASES = {
 }
 
 
+_lazy_getattr, __dir__ = lazy_names(__name__, _PUBLIC, _NAMESPACES)
+
+
 def __getattr__(name: str):
-    """A public name, imported from its module when first used (`_PUBLIC`); a namespace
-    (`_NAMESPACES`); or an old top-level alias of a namespace's name (`_ALIASES`)."""
-    if name in _NAMESPACES:
-        value = importlib.import_module(f".{name}", __name__)
-    elif name in _PUBLIC:
-        value = getattr(importlib.import_module(_PUBLIC[name], __name__), name)
-    elif name in _ALIASES:
-        return getattr(__getattr__(_ALIASES[name]), name)
-    else:
-        raise AttributeError(f"module 'jaxunilat' has no attribute {name!r}")
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+    """A public name or namespace, imported when first used (`_PUBLIC`, `_NAMESPACES`), or
+    an old top-level alias of a namespace's name (`_ALIASES`)."""
+    if name in _ALIASES:
+        return getattr(_lazy_getattr(_ALIASES[name]), name)
+    return _lazy_getattr(name)
 
 
 def _version() -> str:

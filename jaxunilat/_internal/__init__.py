@@ -17,54 +17,44 @@ Each name is imported from its module when first used, so that the command line'
 paths (`jaxunilat --help`) import neither JAX nor NumPy through this package.
 """
 
-import importlib
+from ._lazy import lazy_names
 
 #: Each name, and the module of this package that defines it.
 _WHERE = {
-    "check_plot_format": "_cli",
-    "input_errors": "_cli",
-    "output_errors": "_cli",
-    "EXIT_BROKEN_PIPE": "_errors",
-    "EXIT_INTERNAL": "_errors",
-    "EXIT_NOT_CONVERGED": "_errors",
-    "EXIT_OK": "_errors",
-    "EXIT_RUNTIME": "_errors",
-    "EXIT_USAGE": "_errors",
-    "PROG": "_errors",
-    "InputError": "_errors",
-    "RunError": "_errors",
-    "UsageError": "_errors",
-    "kept_call": "_executables",
-    "bundled_data": "_io",
-    "check_output_dir": "_io",
-    "check_output_paths": "_io",
-    "mode_kind": "_io",
-    "special_kind": "_io",
-    "write_atomically": "_io",
-    "host_device": "_placement",
-    "keep_placement": "_placement",
-    "latency_bound": "_placement",
-    "on_host": "_placement",
-    "bounded_numbers": "_text",
-    "number": "_text",
-    "printable": "_text",
-    "shown": "_text",
-    "check_choice": "_validate",
-    "check_finite": "_validate",
-    "check_range": "_validate",
+    "check_plot_format": "._cli",
+    "input_errors": "._cli",
+    "output_errors": "._cli",
+    "EXIT_BROKEN_PIPE": "._errors",
+    "EXIT_INTERNAL": "._errors",
+    "EXIT_NOT_CONVERGED": "._errors",
+    "EXIT_OK": "._errors",
+    "EXIT_RUNTIME": "._errors",
+    "EXIT_USAGE": "._errors",
+    "PROG": "._errors",
+    "InputError": "._errors",
+    "RunError": "._errors",
+    "UsageError": "._errors",
+    "kept_call": "._executables",
+    "bundled_data": "._io",
+    "check_output_dir": "._io",
+    "check_output_paths": "._io",
+    "mode_kind": "._io",
+    "special_kind": "._io",
+    "write_atomically": "._io",
+    "host_device": "._placement",
+    "keep_placement": "._placement",
+    "latency_bound": "._placement",
+    "on_host": "._placement",
+    "bounded_numbers": "._text",
+    "number": "._text",
+    "printable": "._text",
+    "shown": "._text",
+    "check_choice": "._validate",
+    "check_finite": "._validate",
+    "check_range": "._validate",
 }
 
 __all__ = sorted(_WHERE)
 
 
-def __getattr__(name: str):
-    module = _WHERE.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted([*globals(), *_WHERE])
+__getattr__, __dir__ = lazy_names(__name__, _WHERE)
