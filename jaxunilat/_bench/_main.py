@@ -867,13 +867,9 @@ ROWS = {
 
 def _identify_rows(size: Size, log) -> dict:
     """Every row of `ROWS`, by name: what its function returns."""
-    import importlib
+    import pkgutil
 
-    out = {}
-    for name, target in ROWS.items():
-        module, _, attr = target.partition(":")
-        out[name] = getattr(importlib.import_module(module), attr)(size, log)
-    return out
+    return {name: pkgutil.resolve_name(target)(size, log) for name, target in ROWS.items()}
 
 
 # -- driver ---------------------------------------------------------------------------------

@@ -65,10 +65,9 @@ COMMANDS = (
 
 def _loaded(target: str):
     """The function `target` ("module:function"), its module imported."""
-    import importlib
+    import pkgutil
 
-    module, _, attr = target.partition(":")
-    return getattr(importlib.import_module(module), attr)
+    return pkgutil.resolve_name(target)
 
 
 def written_summary(name: str, target: str) -> str | None:
