@@ -11,6 +11,8 @@ from __future__ import annotations
 import dataclasses
 import math
 
+from jaxunilat._internal import finite_or_none
+
 from ._problem import LOG_PARAMETERS
 
 #: A 95% interval whose ends lie more than this many decades apart bounds nothing useful.
@@ -116,12 +118,6 @@ def estimate(name: str, entry: dict, unit: str = "", *, fixed: bool = False, ide
         fixed=fixed,
         identifiable=None if identifiable is None else bool(identifiable),
     )
-
-
-def finite_or_none(value) -> float | None:
-    """A float, or None where it is not finite (JSON has no inf or NaN)."""
-    value = float(value)
-    return value if math.isfinite(value) else None
 
 
 def bound(name: str, value: float, ci95, unit: str | None = None) -> Bound:

@@ -12,7 +12,9 @@ from decimal import ROUND_HALF_UP, Decimal
 
 import numpy as np
 
-from .._fit._estimate import ABSURD, Bound, Estimate, finite_or_none
+from jaxunilat._internal import finite_or_none
+
+from .._fit._estimate import ABSURD, Bound, Estimate
 from .._fit._outcome import VERDICTS, FileFit, FitOutcome
 from .._fit._problem import PARAMETERS, TRACE_ONLY
 from .._fit._uncertainty import P_INCONSISTENT

@@ -46,6 +46,7 @@ _WHERE = {
     "latency_bound": "._placement",
     "on_host": "._placement",
     "bounded_numbers": "._text",
+    "finite_or_none": "._text",
     "number": "._text",
     "printable": "._text",
     "shown": "._text",

@@ -12,6 +12,7 @@ digits (`2e+5000`), never as the 5 000 digits it was written with; a float as it
 from __future__ import annotations
 
 import decimal
+import math
 import os
 import re
 import reprlib
@@ -110,3 +111,9 @@ def bounded_numbers(text: str, digits: int = 6) -> str:
             return literal
 
     return _LONG_NUMBER.sub(short, text)
+
+
+def finite_or_none(value) -> float | None:
+    """A float, or None where it is not finite (JSON has no inf or NaN)."""
+    value = float(value)
+    return value if math.isfinite(value) else None
