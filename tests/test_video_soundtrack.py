@@ -111,7 +111,7 @@ def write_clip(path, pictures, sound=None, *, codec: str = "aac", start: float =
         video = out.add_stream(codec_v, rate=FPS)
         video.width, video.height, video.pix_fmt = W, H, "yuv420p"
         if codec_v == "libx264":
-            video.options = {"crf": "18", "preset": "veryfast"}
+            video.options = {"crf": "18", "preset": "veryfast", "x264-params": "no-mbtree=1"}
         audio = out.add_stream(codec, rate=RATE, layout="mono") if sound is not None else None
         if codec == "aac" and audio is not None:
             audio.bit_rate = 192_000

@@ -3,7 +3,8 @@ unique frames, scale from g, release, and e end to end.
 
 Each clip is rendered at test time (seeded, 180-320 px, 1.2-2 s, H.264 through PyAV at about
 0.04-0.1 bit per pixel: the compression of a screen recording shared on, below a phone's own
-0.1-0.3) and is as unkind as the real clips in `../shared/real-recordings/video/`: a ping-pong
+0.1-0.3; without x264's macroblock tree, as a phone's hardware encoder, and so the same
+file in every run) and is as unkind as the real clips in `../shared/real-recordings/video/`: a ping-pong
 ball (40 mm, the `pingpong` preset's drag) held for 9-12 frames by a skin-coloured hand of the
 ball's own hue, then dropped; its soft shadow on the wall, touching it, and its contact shadow
 on a wooden floor of its hue; motion blur (the ball integrated over the exposure); a rolling
@@ -45,22 +46,22 @@ from video_like import ClipSpec, render_clip  # noqa: E402
 CLIPS = {
     "24-in-30-convert": dict(
         fps=24, container="convert", container_fps=30, size=(320, 240), px_per_m=500, drop=0.35, duration=2.0,
-        crf=20, readout=0.025,
+        crf=22, readout=0.025,
     ),
     "25-upside-down-drops": dict(
-        fps=25, drops=2, size=(320, 240), rotation=180, px_per_m=500, drop=0.35, duration=2.0, crf=20,
+        fps=25, drops=2, size=(320, 240), rotation=180, px_per_m=500, drop=0.35, duration=2.0, crf=22,
         readout=0.025, exposure=1 / 60,
     ),
     "30-screen-portrait": dict(
-        fps=30, container="screen", size=(180, 320), rotation=90, px_per_m=560, duration=2.0, crf=20,
+        fps=30, container="screen", size=(180, 320), rotation=90, px_per_m=560, duration=2.0, crf=22,
         readout=0.02,
     ),
     "60-portrait-drops": dict(
-        fps=60, drops=3, size=(180, 320), rotation=270, px_per_m=560, duration=1.6, crf=18, readout=0.012
+        fps=60, drops=3, size=(180, 320), rotation=270, px_per_m=560, duration=1.6, crf=20, readout=0.012
     ),
     "240-landscape": dict(
         fps=240, size=(256, 192), px_per_m=380, drop=0.35, duration=1.2, exposure=1 / 480, readout=0.003,
-        crf=16, held=12,
+        crf=18, held=12,
     ),
 }  # fmt: skip
 BALL = 0.040  # m, the rendered ball's diameter
@@ -194,6 +195,32 @@ def test_release_and_held_frames(clip):
     assert any(n.startswith("release from rest") for n in trace.notes), name
     h0 = float(truth.height[kept[0]])
     assert abs(trace.x0 - h0) < 0.03 * h0 + 0.003, (name, trace.x0, h0)
+
+
+#: The checks of one clip, each given (name, truth, trace).
+CHECKS = (
+    test_clips_are_as_specified,
+    test_tracking_within_half_a_pixel,
+    test_unique_rate_repeats_and_drops,
+    test_scale_from_g,
+    test_release_and_held_frames,
+)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.parametrize("name", sorted(CLIPS))
+def test_other_seeds_pass_every_check(name, seed, tmp_path):
+    """Each scene again with seeds 1-3: another hand and tremble, wall, floor, drift, sensor
+    noise, release time and schedule of repeats and drops, and so other decisions of the
+    codec. Every check above holds. Among them: an upside-down clip whose apex falls between
+    a dropped frame and a near-still one, with g voted 17 % low (`choose_path` allows for
+    the vote's uncertainty), and a screen recording whose repeat beside the moving hand
+    carries more of the codec's noise than the flight's repeats (its grid is kept)."""
+    truth = render_clip(tmp_path / f"{name}.mp4", ClipSpec(**{**CLIPS[name], "seed": seed}))
+    clip = (name, truth, trace_video(truth.path, diameter=BALL))
+    for check in CHECKS:
+        check(clip)
 
 
 def test_source_grid_patterns():

@@ -517,7 +517,9 @@ def render_clip(path, spec: ClipSpec) -> Clip:
         stream.width, stream.height = stored
         stream.pix_fmt = "yuv420p"
         if codec == "libx264":
-            stream.options = {"crf": str(spec.crf), "preset": "veryfast"}
+            # no macroblock tree: a phone's hardware encoder has none, and libx264's is not
+            # deterministic (the same frames encode differently from run to run)
+            stream.options = {"crf": str(spec.crf), "preset": "veryfast", "x264-params": "no-mbtree=1"}
         else:
             stream.bit_rate = 400_000
         if spec.rotation:

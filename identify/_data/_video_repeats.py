@@ -180,16 +180,18 @@ def find_repeats(t: np.ndarray, frames: np.ndarray) -> Repeats:
     repeat = np.zeros(len(motion), dtype=bool)
     log = np.log(np.maximum(motion, 1e-3))
     low = _two_means(log)
+    moving = 0.0  # a pair's motion from which it moved like the clip's distinct frames
     if low.any() and (~low).any():
         lo_med, hi_med = np.median(motion[low]), np.median(motion[~low])
         if hi_med >= SEPARATION * lo_med:
+            moving = float(np.sqrt(lo_med * hi_med))
             distinct_noise = np.median(noise[~low])
             repeat = low & (motion <= REPEAT_FACTOR * lo_med) & (noise <= NOISE_FACTOR * distinct_noise)
             repeat &= _between_motion(~low)
     is_repeat = np.concatenate([[False], repeat])
     container = float(np.median(np.diff(t)))
     drops = int(np.sum(np.diff(t) > DROP_FACTOR * container))
-    keep, times, skipped = _unique_times(t, is_repeat, motion, container)
+    keep, times, skipped = _unique_times(t, is_repeat, motion, container, moving)
     steps = np.diff(times)
     if skipped is None:
         step = float(np.median(steps)) if len(steps) else float("nan")
@@ -211,7 +213,7 @@ def find_repeats(t: np.ndarray, frames: np.ndarray) -> Repeats:
     )
 
 
-def _unique_times(t, is_repeat, motion, container):
+def _unique_times(t, is_repeat, motion, container, moving):
     """The unique frames (`keep`), their times and their source grid indices (None where the
     stamps are kept: no repeats, or no steady grid); `is_repeat` is updated in place (a
     still scene's repeats found on the grid added, near-still frames that are no repeats
@@ -219,7 +221,10 @@ def _unique_times(t, is_repeat, motion, container):
     recorder shows when it keeps the last frame up) stays one only if it changed as little
     as the clip's repeats do (`COPY_FACTOR` times their median motion), else it is the
     source frame itself (a release, a bounce: frames that change little); a grid that would
-    call a frame that changed more a repeat of a still scene is no grid."""
+    call a frame that changed more a repeat of a still scene is no grid. There, "more" is
+    also at least `moving`, the geometric mean of the repeats' and the distinct frames'
+    median motion: a repeat next to a moving hand carries more of the codec's noise than
+    the flight's repeats."""
     for _ in range(4):
         keep = np.flatnonzero(~is_repeat)
         if not is_repeat.any():
@@ -246,7 +251,7 @@ def _unique_times(t, is_repeat, motion, container):
                     restore.append(k)
         if not restore:
             still = np.concatenate([[False], np.diff(index) == 0])
-            if np.any(motion[keep[still] - 1] > COPY_FACTOR * clean):
+            if np.any(motion[keep[still] - 1] > max(COPY_FACTOR * clean, moving)):
                 return keep, t[keep].astype(float), None  # a frame that moved is no repeat: no grid
             is_repeat[keep[still]] = True
             return keep[~still], times[~still], index[~still]

@@ -15,7 +15,8 @@
    blob much larger than its fully covered core (a ball in a hand of nearly its hue) is cut
    along the core's margin (`_split_cores`).
 3. **Gravity in pixels:** every chain of candidates over five successive frames whose three
-   triples move, turn downwards and accelerate alike votes for its vertical acceleration;
+   triples move, turn downwards and accelerate alike, each triple's blobs of alike area
+   (`AREA_ALIKE`), votes for its vertical acceleration;
    the votes' peak is the first estimate of g in px/s² (the parabola fits refine it). A clip
    faster than `VOTE_RATE` frames/s votes on every k-th frame (at 240 frames/s gravity moves
    the ball by a tenth of a pixel from frame to frame).
@@ -68,6 +69,10 @@ MAX_CANDIDATES = 8
 #: rolling shutter stretches a falling ball's steps and squeezes a rising one's, by tens of
 #: percent at the bottom of a fall; drag bends them a little).
 VOTE_ALIKE = 0.25
+#: The blobs of a voting triple differ in area by at most this factor (one ball, blurred a
+#: little more or less from frame to frame; a codec's speck, a shadow on the floor or the
+#: hand is another object, and three such things can line up on a parabola of their own).
+AREA_ALIKE = 4.0
 #: Gravity is voted on frames at most this many a second (a faster clip votes on every
 #: k-th frame: `gravity_votes`).
 VOTE_RATE = 60.0
@@ -435,14 +440,16 @@ def _second_difference(p1, p2, p3, dt1, dt2):
 def _triples(a, b, c, dt1, dt2, step, reach):
     """The accelerations (m, m, m, 2; px/s²) of the candidate triples of three successive
     frames, and which are plausible for a ball in flight: moving, turning downwards, no step
-    longer than `reach` px, none of them a shadow."""
+    longer than `reach` px, none of them a shadow, their areas alike within `AREA_ALIKE`."""
     p1, p2, p3 = a.pos[:, None, None], b.pos[None, :, None], c.pos[None, None, :]
     acc = _second_difference(p1, p2, p3, dt1, dt2)
     moving = np.linalg.norm(p3 - p1, axis=-1) * step / (dt1 + dt2) > 1.5
     near = (np.linalg.norm(p2 - p1, axis=-1) < reach) & (np.linalg.norm(p3 - p2, axis=-1) < reach)
     down = (acc[..., 1] * step**2 > 0.2) & (np.abs(acc[..., 0]) < 0.3 * acc[..., 1])
     shadow = (a.shadow[:, None, None] + b.shadow[None, :, None] + c.shadow[None, None, :]) > 0
-    return acc, moving & near & down & ~shadow
+    areas = np.broadcast_arrays(a.area[:, None, None], b.area[None, :, None], c.area[None, None, :])
+    alike = np.maximum.reduce(areas) <= AREA_ALIKE * np.minimum.reduce(areas)
+    return acc, moving & near & down & ~shadow & alike
 
 
 def gravity_votes(cands: list[_Candidates], t: np.ndarray, reach: float) -> float:
@@ -523,15 +530,18 @@ def _pad(cands: list[_Candidates], det: list[np.ndarray], m: int):
 
 def _motion_cost(p1, p2, p3, dt1, dt2, accel, step, known) -> np.ndarray:
     """The capped squared deviation of p3 from constant-acceleration motion through p1, p2
-    (px; the tolerance grows with the speed: blur, drag, perspective); `GAP_COST` where a
+    (px; the tolerance grows with the speed: blur, drag, perspective; and with the fall
+    over the step, by `VOTE_ALIKE` of it: the voted g is that uncertain, and a rolling
+    shutter stretches a falling ball's steps and squeezes a rising one's); `GAP_COST` where a
     position is missing. Once the ball's looks are `known`, three positions at rest (held,
     resting) cost at most `REST_COST`, and a bounce at most `BOUNCE_COST`: a contact with
     the floor can only push the ball up, so three positions that span one end above the
     free-flight prediction (horizontally near it)."""
-    pred = p2 + (p2 - p1) * (dt2 / dt1) + 0.5 * accel * dt2 * (dt1 + dt2)
+    fall = 0.5 * accel * dt2 * (dt1 + dt2)
+    pred = p2 + (p2 - p1) * (dt2 / dt1) + fall
     miss = np.linalg.norm(p3 - pred, axis=-1)
     d1, d2 = np.linalg.norm(p2 - p1, axis=-1), np.linalg.norm(p3 - p2, axis=-1)
-    tol = 1.0 + 0.08 * d1 * (step / dt1)
+    tol = 1.0 + 0.08 * d1 * (step / dt1) + VOTE_ALIKE * float(np.linalg.norm(fall))
     cost = np.minimum((miss / tol) ** 2, MOTION_CAP)
     if known:
         rest = (d1 < REST_MOTION) & (d2 < REST_MOTION)
