@@ -301,18 +301,26 @@ def test_rotation_from_side_data():
     assert display_rotation(Frame([one, 0, 0, 0, one, 0, 0, 0, 1 << 30])) == 0
 
 
+def _square_in_runs(rng, runs, left):
+    """Frames (60 x 80 gray) of a bright 10 px square at column `left(k)` in source frame k,
+    each source frame with 2 gray levels of new sensor noise and shown `runs[k]` times, each
+    showing re-encoded (0.3 levels of noise); and each source frame's first file frame."""
+    frames, first = [], []
+    for k, n in enumerate(runs):
+        img = 120 + rng.normal(0, 2.0, (60, 80))
+        img[20:30, left(k) : left(k) + 10] += 60
+        first.append(len(frames))
+        frames += [img + rng.normal(0, 0.3, img.shape) for _ in range(n)]
+    return frames, first
+
+
 def test_repeats_in_mixed_runs():
     """Pairs, triples and singles of a moving square on a noisy background: the repeats
     (re-encodings: 0.3 gray levels of noise) found, the distinct frames (2 levels of new
     sensor noise) kept, whatever the run lengths."""
     rng = np.random.default_rng(3)
     runs = [1, 2, 3, 2, 2, 1, 3, 2, 2, 2, 1, 1, 2, 3, 2, 2]
-    frames, first = [], []
-    for k, n in enumerate(runs):
-        img = 120 + rng.normal(0, 2.0, (60, 80))
-        img[20:30, 5 + 4 * k : 15 + 4 * k] += 60
-        first.append(len(frames))
-        frames += [img + rng.normal(0, 0.3, img.shape) for _ in range(n)]
+    frames, first = _square_in_runs(rng, runs, lambda k: 5 + 4 * k)
     t = np.arange(len(frames)) / 60.0
     rep = find_repeats(t, np.asarray(frames, dtype=np.float32))
     assert rep.keep.tolist() == first
@@ -330,16 +338,8 @@ def test_screen_recording_late_frame_on_the_grid_beside_a_noisy_held_repeat():
     on the source's grid: at 19/30 s, not at its stamp a container frame later."""
     rng = np.random.default_rng(5)
     runs = [2] * 18 + [3, 1] + [2] * 10
-    frames, first = [], []
-    for k, n in enumerate(runs):
-        img = 120 + rng.normal(0, 2.0, (60, 80))
-        x = 5 + 4 * max(0, k - 10)
-        img[20:30, x : x + 10] += 60
-        first.append(len(frames))
-        copies = [img + rng.normal(0, 0.3, img.shape) for _ in range(n)]
-        if k == 5:
-            copies[1][40:50, 60:70] += 3.0
-        frames += copies
+    frames, first = _square_in_runs(rng, runs, lambda k: 5 + 4 * max(0, k - 10))
+    frames[first[5] + 1][40:50, 60:70] += 3.0
     t = np.arange(len(frames)) / 60.0
     rep = find_repeats(t, np.asarray(frames, dtype=np.float32))
     assert rep.keep.tolist() == first
